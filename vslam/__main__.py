@@ -1,0 +1,5 @@
+import sys
+
+from vslam.cli.main import main
+
+sys.exit(main())

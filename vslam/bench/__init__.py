@@ -1,0 +1,1 @@
+"""Benchmarks run by `vslam bench NAME`; shared helpers in `vslam.bench._common`."""

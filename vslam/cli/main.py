@@ -1,0 +1,64 @@
+"""The `vslam` command line.
+
+Every sub-command lives in its own module `vslam/cli/cmd_<name>.py` exposing
+
+    NAME: str                      # the sub-command, e.g. "simulate"
+    HELP: str                      # one line for `vslam --help`
+    def add_arguments(parser)      # fill an argparse parser
+    def run(args) -> int           # do the work, return the exit code
+
+Modules are discovered, so adding a command never touches this file. Command modules import
+heavy libraries (gtsam, rerun) inside `run`, which keeps `vslam --help` fast.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from types import ModuleType
+
+import vslam.cli as _cli_pkg
+
+# Errors a user can cause with bad input: reported as one clear line, no traceback.
+USER_ERRORS = (ValueError, OSError, KeyError)
+
+
+def _command_modules() -> list[ModuleType]:
+    names = sorted(m.name for m in pkgutil.iter_modules(_cli_pkg.__path__) if m.name.startswith("cmd_"))
+    return [importlib.import_module(f"vslam.cli.{n}") for n in names]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="vslam",
+        description="Visual SLAM with loop closure for ground robots (downward camera, compact-descriptor loops, GTSAM).",
+    )
+    parser.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for mod in _command_modules():
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
+        mod.add_arguments(p)
+        if p.get_default("func") is None:
+            p.set_defaults(func=mod.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("vslam: interrupted", file=sys.stderr)
+        return 130
+    except USER_ERRORS as exc:
+        if args.debug:
+            raise
+        print(f"vslam {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
