@@ -273,8 +273,12 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
     - the kept loops minus the suspects (kept with r^2 > s c^2), re-initialised likewise;
     - also minus the isolated kept loops whose standardized residual exceeds s c^2 (graph.consistency): a false loop
       that fits its threshold inside a map bent around it;
+    - plus the rejected loops within `readmit_factor` of their threshold: true loops deferred by the gate can miss
+      the threshold in a map that lacks them, and only fit once they are in;
     takes the proposal with the lowest f, and re-labels every loop (r^2 <= s c^2), deferred ones included. Stops when
-    nothing improves and the labels hold. Returns (values, labels, final cost of the kept graph, rounds,
+    nothing improves and the labels hold. At most `reinit_max_solves` re-initialisations in all (each is one LAGO /
+    chordal solve and a full LM: ~1 s on w10000); past that, proposals are only polished from the current values.
+    Returns (values, labels, final cost of the kept graph, rounds,
     LM iterations, scale s).
     """
     iters = 0
@@ -287,7 +291,12 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
         r2 = squared_residuals(built.loops, v)
         return float(base.error(v)) + 0.5 * float(np.minimum(r2, thr).sum()), r2
 
+    budget = [params.reinit_max_solves]
+
     def from_scratch(labels):
+        if budget[0] <= 0:
+            return _lm(built.graph(labels), values, params)       # budget spent: warm start only
+        budget[0] -= 1
         guess = values_from_array(data.dim, initial_guess(data, built.subset(labels), method))
         return _lm(built.graph(labels), guess, params)
 
@@ -301,6 +310,10 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
         best_f, r2 = tls(values, thr)
         proposals = []
         candidates = [inlier, inlier & (r2 <= thr)]
+        if params.readmit_factor > 1.0:
+            near = ~inlier & (r2 <= params.readmit_factor * thr)
+            if near.any():
+                candidates.append((inlier & (r2 <= thr)) | near)
         if params.isolation_window > 0:
             iso = isolated(pos_a, pos_b, inlier, params.isolation_window)
             if iso.sum() > params.isolation_max_tests:

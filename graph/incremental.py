@@ -69,13 +69,16 @@ class IncrementalPoseGraph:
         self._loop_state: list[int] = []
         self._loop_c2: list[float] = []
         self._arrival_r2: deque[float] = deque(maxlen=self.params.gate_window)
+        self._admitted_r2: deque[float] = deque(maxlen=self.params.gate_window)   # arrival r^2 of admitted loops
         self._gating = self.params.gate_loops and self.params.robust != RobustMode.NONE
         self._c2_cache: dict[float, float] = {}
         dof = TANGENT_DIM[dim]
         self._c2_base = float(chi2.ppf(self.params.inlier_probability, dof))
         self._gate_extra = float(chi2.ppf(self.params.gate_probability, dof) - chi2.ppf(self.params.inlier_probability, dof))
         self._info_ok: dict[bytes, np.ndarray] = {}
-        self._drift: list = []                        # per node: (base key, A, Q) of the odometry chain, or None
+        self._drift: list = []                        # per node: first odometry link (older key, Ad, cov) or None
+        self._since: dict[int, np.ndarray] = {}       # drift covariance since the last loop closure (memo)
+        self._tied: set[int] = {0}                    # nodes tied to the map by an admitted loop (and the anchor)
         self._gate_c2: list[float] = []
         self._held: list[int] = []                    # loops waiting for the gate's warm-up
         self._counted: set[int] = set()
@@ -172,23 +175,17 @@ class IncrementalPoseGraph:
         return c2
 
     def _track_drift(self, ki: int, kj: int, z: np.ndarray, info: np.ndarray) -> None:
-        """Linear map from the chain base's covariance to a pending node's: cov_j = A cov_base A^T + Q."""
+        """Remember the first odometry link of a node to an older one: (older key, Ad(z^-1), odometry covariance)."""
         if not self._gating:
             return
         zp = to_pose(self.dim, z)
         if kj < ki:                                    # orient the edge older -> newer
             ki, kj, zp = kj, ki, zp.inverse()
-        if self._in_isam[kj] or self._drift[kj] is not None:
+        if self._drift[kj] is not None:
             return
-        ad = np.asarray(zp.inverse().AdjointMap(), float)
         q = np.linalg.inv(gtsam_information(self.dim, info))
-        if self._in_isam[ki]:
-            base, A, Q = ki, np.eye(len(q)), np.zeros_like(q)
-        elif self._drift[ki] is not None:
-            base, A, Q = self._drift[ki]
-        else:                                          # the anchor, or a node placed only by its guess
-            base, A, Q = -1, np.eye(len(q)), np.zeros_like(q)
-        self._drift[kj] = (base, ad @ A, ad @ Q @ ad.T + q)
+        ad = np.asarray(zp.inverse().AdjointMap(), float) if self.params.gate_drift_transport else np.eye(len(q))
+        self._drift[kj] = (ki, ad, q)
 
     def _edge_args(self, i, j, delta, cov, information):
         for n in (i, j):
@@ -209,12 +206,20 @@ class IncrementalPoseGraph:
         return self._key[int(i)], self._key[int(j)], z, info
 
     def _robust(self, factor):
+        """The loop factor behind the online kernel. Its width follows the arrival residuals: a kernel of width 1 in
+        the stated units does nothing where the stated information is far looser than the data (w10000: residuals
+        ~0.05 whitened), and admitted false loops would bend the online map; so width^2 = min(k^2,
+        `gate_kernel_factor` x lower quartile of the recent arrival r^2)."""
         mode = self.params.isam2_loop_kernel if self.params.robust == RobustMode.GNC else self.params.robust
-        from graph.batch import mestimator
-
-        est = mestimator(mode, self.params)
-        if est is None:
+        if mode not in (RobustMode.CAUCHY, RobustMode.HUBER):
             return factor
+        k = self.params.cauchy_k if mode == RobustMode.CAUCHY else self.params.huber_k
+        if self._gating and len(self._arrival_r2) >= self.params.gate_min_loops:
+            q = float(np.quantile(np.fromiter(self._arrival_r2, float), self.params.gate_quantile))
+            k = min(k, float(np.sqrt(self.params.gate_kernel_factor * q)))
+        k = max(k, 1e-6)
+        est = (gtsam.noiseModel.mEstimator.Cauchy.Create(k) if mode == RobustMode.CAUCHY
+               else gtsam.noiseModel.mEstimator.Huber.Create(k))
         return factor.cloneWithNewNoiseModel(gtsam.noiseModel.Robust.Create(est, factor.noiseModel()))
 
     def _current(self, k: int):
@@ -241,30 +246,44 @@ class IncrementalPoseGraph:
             return None
         if n < 3:
             return float("inf")
-        return self.params.gate_factor * float(np.quantile(np.fromiter(self._arrival_r2, float),
-                                                           self.params.gate_quantile))
+        q = float(np.quantile(np.fromiter(self._arrival_r2, float), self.params.gate_quantile))
+        if self.params.gate_admitted_cap and len(self._admitted_r2) >= self.params.gate_window // 2:
+            # only with a long admitted history: on a few dozen loops it ratchets the gate tight (CSAIL)
+            q = min(q, self.params.gate_admitted_cap * float(np.quantile(np.fromiter(self._admitted_r2, float),
+                                                                         self.params.gate_quantile)))
+        return self.params.gate_factor * q
 
-    def _uncertainty(self, k: int, memo: dict) -> np.ndarray:
-        """Covariance of node k relative to the anchor, gtsam tangent order: the iSAM2 marginal for inserted
-        nodes, the marginal of the chain's base propagated through odometry for pending ones."""
-        if k in memo:
-            return memo[k]
-        if self._in_isam[k]:
-            try:
-                out = np.asarray(self._isam.marginalCovariance(k), float)
-            except RuntimeError:           # near-singular system: judge the loop on its own covariance
-                out = np.zeros((TANGENT_DIM[self.dim],) * 2)
-        elif self._drift[k] is None:
-            out = np.zeros((TANGENT_DIM[self.dim],) * 2)
-        else:
-            base, A, Q = self._drift[k]
-            out = A @ self._uncertainty(base, memo) @ A.T + Q if base >= 0 else Q
-        memo[k] = out
-        return out
+    def _uncertainty(self, k: int) -> np.ndarray:
+        """Odometry drift of node k since the robot last closed a loop (gtsam tangent order): the covariance of
+        the odometry chain back to the latest node tied to the map by an admitted loop (or the anchor), carried
+        into k's frame. This, not the global marginal, is what a true loop's residual has to allow for: the
+        marginal of a node far from the anchor is dominated by uncertainty the loop's two ends share, and would
+        let random loops through (measured on w10000, README)."""
+        chain = []
+        while k not in self._since:
+            link = self._drift[k]
+            if link is None or k in self._tied:
+                self._since[k] = np.zeros((TANGENT_DIM[self.dim],) * 2)
+                break
+            chain.append(k)
+            k = link[0]
+        cov = self._since[k]
+        for k in reversed(chain):
+            _, ad, q = self._drift[k]
+            cov = ad @ cov @ ad.T + q
+            self._since[k] = cov
+        return cov
 
-    def _arrival_residual(self, s: int, memo_pose: dict, memo_cov: dict) -> float:
-        """Squared residual of loop s against the current estimate, over the loop's covariance plus the
-        uncertainty of its newer endpoint (the drift since the map last held it)."""
+    def _tie(self, s: int) -> None:
+        """An admitted loop ties its newer end to the map: drift restarts there."""
+        k = max(self._edges[self._loop_edge[s]][:2])
+        self._tied.add(k)
+        for j in [j for j in self._since if j >= k]:
+            del self._since[j]
+
+    def _arrival_residual(self, s: int, memo_pose: dict) -> float:
+        """Squared residual of loop s against the current estimate, over the loop's covariance plus the drift of
+        its newer end since the last loop closure."""
         ki, kj = self._edges[self._loop_edge[s]][:2]
         v = gtsam.Values()
         for k in (ki, kj):
@@ -276,10 +295,10 @@ class IncrementalPoseGraph:
             return 2.0 * f.error(v)
         e = np.asarray(f.unwhitenedError(v), float)
         if kj >= ki:
-            sig = self._uncertainty(kj, memo_cov)
+            sig = self._uncertainty(kj)
         else:                                  # perturbing x_i on the right moves the error by -Ad(z^-1)
             ad = np.asarray(f.measured().inverse().AdjointMap(), float)
-            sig = ad @ self._uncertainty(ki, memo_cov) @ ad.T
+            sig = ad @ self._uncertainty(ki) @ ad.T
         cov = np.asarray(f.noiseModel().covariance(), float) + sig
         try:
             return float(e @ np.linalg.solve(cov, e))
@@ -296,7 +315,6 @@ class IncrementalPoseGraph:
         slots = self._held + slots
         self._held = []
         memo_pose: dict[int, object] = {}
-        memo_cov: dict[int, np.ndarray] = {}
         old = {k for s in slots for k in self._edges[self._loop_edge[s]][:2] if self._in_isam[k]}
         if len(old) > 8 and self._estimate is None:
             # single-pose estimates cost a partial back-substitution each; past a few, one full estimate is cheaper
@@ -310,7 +328,7 @@ class IncrementalPoseGraph:
                 self._union(ki, kj)
                 admitted.append(s)
                 continue
-            r2 = self._arrival_residual(s, memo_pose, memo_cov)
+            r2 = self._arrival_residual(s, memo_pose)
             if s not in self._counted:
                 self._counted.add(s)
                 self._arrival_r2.append(r2)
@@ -326,7 +344,9 @@ class IncrementalPoseGraph:
             # shifts both through its threshold
             if r2 <= min(self._gate_c2[s], level * self._loop_c2[s] / self._c2_base):
                 admitted.append(s)
+                self._admitted_r2.append(r2)
                 self._union(*self._edges[self._loop_edge[s]][:2])
+                self._tie(s)
             else:
                 self._loop_state[s] = DEFERRED
         return admitted

@@ -75,12 +75,14 @@ class GraphParams:
     gnc_cost_tol: float = 1e-5           # ... or when the weighted cost changes less than this, relative
     reinit_rounds: int = 5               # after the robust solve: descend the TLS objective with re-initialisation
     #                                      (LAGO / chordal) and suspect-dropping jumps until the labels settle
+    reinit_max_solves: int = 10          # at most this many re-initialisations over all rounds (cost bound)
     calibrate_noise: bool = True         # scale the thresholds of those rounds by `thresholds.fence_scale` of the
     #                                      kept loops (public graphs state information 10-1000x too loose)
     fence_factor: float = 10.0           # an inlier's r^2 is within this many times the kept loops' q-quantile ...
     fence_quantile: float = 0.9          # ... (heavy tails: a high quantile, not the median)
     isolation_window: int = 5            # kept loops with no other kept loop within this many nodes at both ends get
     #                                      the standardized-residual test in those rounds (0: off)
+    readmit_factor: float = 100.0        # propose re-admitting rejected loops within this factor of their threshold
     isolation_max_tests: int = 50        # at most this many per round (largest r^2 / threshold first)
     huber_k: float = 1.345               # kernel width on the whitened residual norm
     cauchy_k: float = 1.0
@@ -88,13 +90,22 @@ class GraphParams:
     probability_clip: float = 1e-3       # p is clipped to [clip, 1 - clip] before the logit
     # --- loop gate (robust modes): a loop is tested on arrival against the current estimate, in time order
     gate_loops: bool = True              # batch robust solves run the gated incremental pass first (see README)
-    gate_uncertainty: bool = True        # add the newer endpoint's marginal covariance to the arrival test
+    gate_uncertainty: bool = True        # add the odometry drift since the last loop closure to the arrival test
+    gate_drift_transport: bool = False   # propagate it through the pose Jacobians (heading error -> lever arm):
+    #                                      right in theory, but absurd stated heading noise (w10000: 1 rad per step)
+    #                                      then opens the gate to random loops (README)
     gate_probability: float = 0.9999     # chi-square quantile of the arrival test (loop + current pose uncertainty)
     gate_factor: float = 50.0            # admit up to this many times ...
     gate_quantile: float = 0.25          # ... this quantile of the recent arrival r^2 (all gated loops)
     gate_batch_nodes: int = 50           # nodes per iSAM2 update in the batch solver's gate pass (each update costs
     #                                      a relinearisation check and one estimate; the drift in between is modelled)
     gate_window: int = 500               # number of recent arrivals in that quantile
+    gate_admitted_cap: float = 1.0       # ... at most this many times that quantile of the recent admitted loops'
+    #                                      r^2 (0: off; active from gate_window / 2 admitted loops): where false loops locally outnumber true ones 3:1 the arrival
+    #                                      quantile is a false loop's and the level runs away (w10000 at 50 %: past
+    #                                      node 6500, 2000 false loops admitted, then minutes per iSAM2 update).
+    #                                      Measured on w10000 at 50 %: 1 -> 55 false admitted, 2 -> 139, 4 -> 1612
+    gate_kernel_factor: float = 4.0      # online kernel width^2 <= this x the gate's quantile of arrival r^2
     gate_min_loops: int = 20             # before this many admitted loops, only the stated model gates
     # --- iSAM2
     isam2_relinearize_threshold: float = 0.1
