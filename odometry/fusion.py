@@ -37,9 +37,10 @@ from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
+from odometry.pose_cov import between_jacobians
 from odometry.poses import between, wrap_angle
 
-__all__ = ["FusionConfig", "FusedTrajectory", "fuse_wheel_gyro", "relative_jacobians"]
+__all__ = ["FusionConfig", "FusedTrajectory", "fuse_wheel_gyro"]
 
 
 @dataclass(frozen=True)
@@ -130,15 +131,6 @@ class FusionConfig:
         return replace(base or cls.default(), **{k: float(v) for k, v in d.items()})
 
 
-def relative_jacobians(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Jacobians of between(a, b) with respect to the poses a and b (each 3x3)."""
-    d = between(a, b)
-    c, s = math.cos(a[2]), math.sin(a[2])
-    ja = np.array([[-c, -s, d[1]], [s, -c, -d[0]], [0.0, 0.0, -1.0]])
-    jb = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    return ja, jb
-
-
 @dataclass
 class FusedTrajectory:
     """Fused poses at the query times.
@@ -191,7 +183,7 @@ class FusedTrajectory:
             return np.zeros(3), np.zeros((3, 3))
         a, b = min(i, j), max(i, j)
         d = between(self.poses[i], self.poses[j])
-        ji, jj = relative_jacobians(self.poses[i], self.poses[j])
+        ji, jj = between_jacobians(self.poses[i], self.poses[j])
         if self.transitions is None or self.state_covariances is None:
             # marginals only: an upper bound that ignores the positive correlation of the two poses
             cov = ji @ self.covariances[i] @ ji.T + jj @ self.covariances[j] @ jj.T
