@@ -1,0 +1,263 @@
+"""`vslam bench odometry`: downward VO drift and speed against two baselines measured in the same run.
+
+Sequences come from the simulator (seeded; blur, lighting, vignetting, noise and camera wobble on; wheel
+odometry and gyro with scale errors, noise, bias and slip). For each sequence:
+
+- VO: `odometry.vo` (LK on keyframe corners -> floor -> Kabsch in RANSAC), with the fused wheel/gyro motion
+  as prediction and fallback;
+- baseline (a): wheel + gyro EKF fusion alone (`odometry.fusion`);
+- baseline (b): OpenCV `estimateAffinePartial2D` (RANSAC) on exactly the same floor-point matches, chained
+  through the same keyframes (rotation angle and translation of the similarity it returns).
+
+Drift: translational error of relative motions over path segments of 1, 2, 5 and 10 m as % of the segment
+length (KITTI-style, averaged over all segment starts), the same for heading in deg/m, and the end-point error
+as % of the path length. Speed: the VO step alone (image decode excluded and reported separately), median per
+frame; baseline (b) replaces our fit time by OpenCV's on the same matches.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+NAME = "odometry"
+HELP = "VO drift and frames/s on simulated floors vs wheel+gyro fusion and cv2.estimateAffinePartial2D"
+
+NATURAL = ("carpet", "concrete", "asphalt", "tiles")
+TRAJECTORIES = ("loop", "figure8", "lawnmower", "random")
+SEGMENTS = (1.0, 2.0, 5.0, 10.0)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="two floors, 300 frames each (a smoke run, not the targets)")
+    p.add_argument("--floors", default="carpet,concrete,asphalt,tiles,wood,gravel",
+                   help="comma-separated floor types (targets are judged on carpet, concrete, asphalt, tiles)")
+    p.add_argument("--frames", type=int, default=1000, help="frames per sequence (default 1000)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--preset", default="default", help="VOConfig preset: default, fast, accurate")
+    p.add_argument("--threads", type=int, default=1,
+                   help="OpenCV threads (default 1: the machine is shared; the VO itself is single-threaded)")
+    p.add_argument("--data", default=None, help="keep the simulated sequences here and reuse them on later runs")
+    p.add_argument("--out", default=None, help="write the results as JSON here")
+
+
+# ---------------------------------------------------------------------------------------------------- metrics
+
+def drift_metrics(est: np.ndarray, gt: np.ndarray, segments=SEGMENTS, step: int = 5) -> dict:
+    """Drift of planar poses `est` against `gt` (both (N, 3), same frames; NaN gt rows are skipped)."""
+    from odometry.poses import between, wrap_angle
+
+    ok = np.all(np.isfinite(gt), axis=1)
+    est, gt = est[ok], gt[ok]
+    dist = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(gt[:, :2], axis=0).T))])
+    out: dict = {"path_m": float(dist[-1])}
+    trans, rot = [], []
+    for length in segments:
+        if dist[-1] < length:
+            continue
+        starts = np.arange(0, len(gt), step)
+        ends = np.searchsorted(dist, dist[starts] + length)
+        keep = ends < len(gt)
+        s, e = starts[keep], ends[keep]
+        de, dg = between(est[s], est[e]), between(gt[s], gt[e])
+        seg_len = dist[e] - dist[s]
+        trans.append(np.hypot(*(de[:, :2] - dg[:, :2]).T) / seg_len * 100.0)
+        rot.append(np.degrees(np.abs(wrap_angle(de[:, 2] - dg[:, 2]))) / seg_len)
+    out["segment_drift_pct"] = float(np.mean(np.concatenate(trans))) if trans else float("nan")
+    out["segment_heading_deg_per_m"] = float(np.mean(np.concatenate(rot))) if rot else float("nan")
+    g0 = between(gt[0], gt)  # ground truth expressed from its first pose, like the estimate
+    e0 = between(est[0], est)
+    out["end_drift_pct"] = float(np.hypot(*(e0[-1, :2] - g0[-1, :2])) / max(dist[-1], 1e-9) * 100.0)
+    out["end_heading_deg_per_m"] = float(np.degrees(abs(wrap_angle(e0[-1, 2] - g0[-1, 2]))) / max(dist[-1], 1e-9))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------- one run
+
+class _AffineBaseline:
+    """cv2.estimateAffinePartial2D on the VO's own floor matches, chained through the VO's keyframes."""
+
+    def __init__(self, camera, threshold_m: float):
+        self.camera = camera
+        self.threshold = threshold_m
+        self.poses: list[np.ndarray] = []
+        self.seconds: list[float] = []
+        self.failures = 0
+
+    def __call__(self, est) -> None:
+        import cv2
+
+        from odometry.poses import compose
+        from odometry.vo import Reference, VOStatus
+
+        i = est.index
+        if i == 0:
+            self.poses.append(np.zeros(3))
+            self.seconds.append(0.0)
+            return
+        motion, base = est.delta, self.poses[i - 1]
+        dt = 0.0
+        if est.status == VOStatus.OK and len(est.matches) >= 2:
+            ref = self.camera.pixel_to_floor(est.matches[:, :2])
+            cur = self.camera.pixel_to_floor(est.matches[:, 2:])
+            t0 = time.perf_counter()
+            m, _ = cv2.estimateAffinePartial2D(cur, ref, method=cv2.RANSAC, ransacReprojThreshold=self.threshold,
+                                               maxIters=2000, confidence=0.999, refineIters=10)
+            dt = time.perf_counter() - t0
+            if m is not None:
+                motion = np.array([m[0, 2], m[1, 2], math.atan2(m[1, 0], m[0, 0])])
+                if est.reference == Reference.KEYFRAME:
+                    base = self.poses[est.keyframe_index]
+            else:
+                self.failures += 1
+        self.poses.append(compose(base, motion))
+        self.seconds.append(dt)
+
+
+def _simulate(floor: str, trajectory: str, frames: int, seed: int, where: Path) -> Path:
+    from vslam.sim import SimConfig, simulate
+    from vslam.sim.simulate import length_for_frames
+
+    cfg = SimConfig(floor=floor, trajectory=trajectory, seed=seed, max_frames=frames,
+                    length=length_for_frames(frames, SimConfig.fps, SimConfig.speed))
+    out = where / f"{floor}_{trajectory}_{frames}_s{seed}"
+    if not (out / "frames.csv").is_file():
+        simulate(cfg, out, overwrite=True)
+    return out
+
+
+def run_sequence(path: Path, preset: str = "default") -> dict:
+    """VO + both baselines on one sequence directory; returns metrics and timings."""
+    from odometry.fusion import fuse_wheel_gyro
+    from odometry.poses import between
+    from odometry.vo import VOConfig, VOStatus, run_visual_odometry
+    from vslam.io import open_sequence
+
+    seq = open_sequence(path)
+    cam = seq.require_camera()
+    gt = seq.groundtruth_planar()
+    gt = between(gt[0], gt)
+    t0 = time.perf_counter()
+    fused = fuse_wheel_gyro(seq.odometry.timestamps, seq.odometry.v, seq.odometry.omega, seq.imu.timestamps,
+                            seq.imu.gyro_z, seq.timestamps)
+    fusion_s = time.perf_counter() - t0
+    cfg = VOConfig.preset(preset)
+    base = _AffineBaseline(cam, cfg.ransac_threshold_px * cam.ground_resolution())
+    fit_s: list[float] = []
+
+    def on_frame(est) -> None:
+        fit_s.append(est.fit_seconds)
+        base(est)
+
+    vo = run_visual_odometry(cam, seq.timestamps, lambda i: seq.image(i, gray=True), cfg,
+                             fallback=lambda i: fused.relative(i - 1, i), on_frame=on_frame)
+    vo_s = vo.vo_seconds[1:]
+    fit = np.asarray(fit_s[1:])
+    aff = np.asarray(base.seconds[1:])
+    counts = {s.value: int(sum(1 for x in vo.status if x == s)) for s in VOStatus}
+    return {
+        "sequence": path.name,
+        "frames": len(seq),
+        "status": counts,
+        "keyframes": int(vo.is_keyframe.sum()),
+        "median_inliers": float(np.median(vo.n_inliers[1:])),
+        "median_rms_px": float(np.nanmedian(vo.rms_px[1:])) if np.any(np.isfinite(vo.rms_px[1:])) else float("nan"),
+        "decode_ms": float(np.median(vo.image_seconds) * 1e3),
+        "vo": {**drift_metrics(vo.poses, gt), "step_ms": float(np.median(vo_s) * 1e3),
+               "fit_ms": float(np.median(fit) * 1e3), "fps": float(1.0 / np.median(vo_s))},
+        "fusion": {**drift_metrics(fused.poses, gt), "step_ms": fusion_s / len(seq) * 1e3,
+                   "fps": len(seq) / fusion_s},
+        "affine": {**drift_metrics(np.asarray(base.poses), gt),
+                   "step_ms": float(np.median(vo_s - fit + aff) * 1e3),
+                   "fit_ms": float(np.median(aff) * 1e3),
+                   "fps": float(1.0 / np.median(vo_s - fit + aff)), "failures": base.failures},
+    }
+
+
+# ---------------------------------------------------------------------------------------------------- command
+
+METHODS = (("vo", "VO (LK + Kabsch/RANSAC)"), ("fusion", "(a) wheel + gyro EKF"),
+           ("affine", "(b) estimateAffinePartial2D"))
+
+
+def run(args: argparse.Namespace) -> int:
+    import cv2
+
+    from vslam.bench._common import format_table, write_json
+
+    if args.frames < 50:
+        raise ValueError("--frames must be at least 50")
+    floors = [f.strip() for f in args.floors.split(",") if f.strip()]
+    frames = args.frames
+    if args.quick:
+        floors, frames = floors[:2], min(frames, 300)
+    cv2.setNumThreads(max(1, args.threads))
+    tmp = None
+    if args.data:
+        where = Path(args.data)
+        where.mkdir(parents=True, exist_ok=True)
+    else:
+        tmp = tempfile.TemporaryDirectory(prefix="vslam-bench-odometry-")
+        where = Path(tmp.name)
+    results = []
+    try:
+        for k, floor in enumerate(floors):
+            traj = TRAJECTORIES[k % len(TRAJECTORIES)]
+            t0 = time.perf_counter()
+            path = _simulate(floor, traj, frames, args.seed + k, where)
+            t1 = time.perf_counter()
+            r = run_sequence(path, args.preset)
+            r.update(floor=floor, trajectory=traj, simulate_s=t1 - t0, run_s=time.perf_counter() - t1)
+            results.append(r)
+            print(f"{floor:>12} {traj:>9}: VO {r['vo']['segment_drift_pct']:.3f} % "
+                  f"(end {r['vo']['end_drift_pct']:.3f} %), fusion {r['fusion']['segment_drift_pct']:.3f} %, "
+                  f"affine {r['affine']['segment_drift_pct']:.3f} %, VO {r['vo']['fps']:.0f} frames/s, "
+                  f"status {r['status']}", flush=True)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+
+    headers = ["floor", "trajectory", "frames", "path m", "method", "drift % (1-10 m segments)", "end drift %",
+               "heading deg/m", "frames/s"]
+    rows = []
+    for r in results:
+        for key, label in METHODS:
+            m = r[key]
+            rows.append([r["floor"], r["trajectory"], r["frames"], round(m["path_m"], 1), label,
+                         m["segment_drift_pct"], m["end_drift_pct"], m["segment_heading_deg_per_m"], m["fps"]])
+    natural = [r for r in results if r["floor"] in NATURAL]
+    summary = {}
+    srows = []
+    for key, label in METHODS:
+        sel = natural or results
+        med = {k: float(np.median([r[key][k] for r in sel])) for k in
+               ("segment_drift_pct", "end_drift_pct", "segment_heading_deg_per_m", "fps")}
+        summary[key] = med
+        srows.append([label, med["segment_drift_pct"], med["end_drift_pct"], med["segment_heading_deg_per_m"],
+                      med["fps"]])
+    decode_ms = float(np.median([r["decode_ms"] for r in results]))
+    print()
+    print(format_table(headers, rows))
+    print()
+    print(f"Median over {'natural floors (' + ', '.join(r['floor'] for r in natural) + ')' if natural else 'all'}:")
+    print(format_table(["method", "drift %", "end drift %", "heading deg/m", "frames/s"], srows))
+    vo, fa, af = summary["vo"], summary["fusion"], summary["affine"]
+    checks = {
+        "drift_le_0.5pct": vo["segment_drift_pct"] <= 0.5,
+        "better_than_fusion": vo["segment_drift_pct"] < fa["segment_drift_pct"],
+        "better_than_affine": vo["segment_drift_pct"] < af["segment_drift_pct"],
+        "vo_fps_ge_100": vo["fps"] >= 100.0,
+    }
+    print(f"\nimage decode (excluded above): {decode_ms:.2f} ms/frame ({1e3 / decode_ms:.0f} frames/s)")
+    print("targets: " + ", ".join(f"{k} {'met' if v else 'NOT met'}" for k, v in checks.items()))
+    if args.out:
+        write_json(args.out, {"benchmark": "odometry", "quick": bool(args.quick), "frames": frames,
+                              "preset": args.preset, "opencv_threads": max(1, args.threads), "seed": args.seed,
+                              "sequences": results, "summary_natural_median": summary, "decode_ms": decode_ms,
+                              "targets": checks})
+        print(f"wrote {args.out}")
+    return 0
