@@ -64,6 +64,32 @@ def normalize(gray: np.ndarray, target_std: float = 40.0) -> np.ndarray:
     return cv2.convertScaleAbs(gray, alpha=alpha, beta=128.0 - alpha * float(mean[0, 0]))
 
 
+def normalize_local(gray: np.ndarray, radius: int = 8, target_std: float = 40.0) -> np.ndarray:
+    """Local contrast normalisation: (I - local mean) / local std over a (2 radius + 1)^2 box.
+
+    Vignetting and uneven light are smooth multiplicative/additive fields that stay put in the image while the
+    floor moves under them; LK's brightness constancy then breaks, biasing the flow (the more, the weaker the
+    texture). Dividing them out locally makes LK's template match again.
+    """
+    f = gray.astype(np.float32)
+    k = (2 * radius + 1, 2 * radius + 1)
+    mu = cv2.boxFilter(f, -1, k, borderType=cv2.BORDER_REFLECT)
+    var = cv2.boxFilter(f * f, -1, k, borderType=cv2.BORDER_REFLECT) - mu * mu
+    out = (f - mu) * (target_std / np.sqrt(np.maximum(var, 4.0))) + 128.0
+    return np.clip(out, 0, 255).astype(np.uint8)
+
+
+def highpass(gray: np.ndarray, radius: int = 8, target_std: float = 40.0) -> np.ndarray:
+    """I - box mean(I) over a (2 radius + 1)^2 window, rescaled to a fixed spread around 128 (uint8 throughout,
+    ~10x cheaper than `normalize_local`): removes smooth additive light fields and the low-frequency part of
+    vignetting, which stay put in the image while the floor moves under them."""
+    k = 2 * radius + 1
+    mean = cv2.blur(gray, (k, k), borderType=cv2.BORDER_REFLECT)
+    sub = gray[::4, ::4].astype(np.float32) - mean[::4, ::4]
+    alpha = target_std / max(float(sub.std()), 1e-3)
+    return cv2.addWeighted(gray, alpha, mean, -alpha, 128.0)
+
+
 def detect_corners(gray: np.ndarray, max_corners: int, grid: tuple[int, int], quality: float, min_distance: float,
                    border: int, half_resolution: bool = True) -> np.ndarray:
     """Shi-Tomasi corners spread over a grid: at most ceil(max / cells) per cell, strongest first.

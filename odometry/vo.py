@@ -31,7 +31,9 @@ from odometry.camera import CameraModel
 from odometry.pose_cov import between_with_covariance, compose_with_covariance
 from odometry.poses import between, compose, inverse
 from odometry.rigid import RigidFit, ransac_rigid_2d
-from odometry.tracking import BadImage, coarse_shift, contrast, detect_corners, normalize, to_gray, track_lk
+from odometry.tilt_refine import refine_planar_tilt
+from odometry.tracking import (BadImage, coarse_shift, contrast, detect_corners, highpass, normalize, normalize_local,
+                               to_gray, track_lk)
 
 __all__ = ["VOConfig", "VOEstimate", "VOStatus", "VOTrajectory", "Reference", "VisualOdometry",
            "run_visual_odometry"]
@@ -78,12 +80,13 @@ class VOConfig:
     min_distance: float = 14.0
     half_resolution_detection: bool = True
     border: int = 16
-    lk_window: int = 21
-    lk_levels: int = 3
+    lk_window: int = 15
+    lk_levels: int = 0
     lk_iterations: int = 20
     lk_epsilon: float = 0.02
     lk_min_eig: float = 1e-3
-    normalize_lighting: bool = True
+    photometric: str = "highpass"
+    photometric_radius: int = 8
     min_contrast: float = 2.0
     min_features: int = 25
     ransac_threshold_px: float = 1.5
@@ -96,6 +99,7 @@ class VOConfig:
     keyframe_max_rotation: float = math.radians(12.0)
     pixel_sigma: float = 0.05
     covariance_scale: float = 1.0
+    refine_tilt: bool = True
     tilt_sigma: float = 0.003
     height_sigma: float = 0.002
     wobble_time: float = 2.0
@@ -105,13 +109,14 @@ class VOConfig:
     lost_sigma_theta: float = 0.1
     max_failures_before_reset: int = 2
     coarse_retry: bool = True
+    retry_levels: int = 3
     coarse_min_response: float = 0.05
     seed: int = 0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, bool) or f.name == "grid":
+            if isinstance(v, (bool, str)) or f.name == "grid":
                 continue
             if not math.isfinite(v) or v < 0:
                 raise ValueError(f"VOConfig.{f.name} must be a finite number >= 0, got {v!r}")
@@ -211,6 +216,7 @@ class _Keyframe:
     timestamp: float
     gray: np.ndarray     # normalised grey image (LK template)
     pts: np.ndarray      # (N, 2) float32 corner pixels
+    xn: np.ndarray       # (N, 2) their undistorted normalised coordinates
     floor: np.ndarray    # (N, 2) their floor points in the keyframe's base frame
 
 
@@ -243,6 +249,7 @@ class VisualOdometry:
         self._prev_px: np.ndarray | None = None   # tracked keyframe corners in the previous frame (inliers)
         self._failures = 0                        # consecutive frames vision could not measure
         self._fit_seconds = 0.0
+        self._predicted = False
 
     # ------------------------------------------------------------------ public state
     @property
@@ -280,8 +287,14 @@ class VisualOdometry:
             reason = ""
         except BadImage as exc:
             gray, reason = None, str(exc)
-        if self.config.normalize_lighting and gray is not None:
-            gray = normalize(gray)
+        if gray is not None:
+            mode = self.config.photometric
+            if mode == "global":
+                gray = normalize(gray)
+            elif mode == "local":
+                gray = normalize_local(gray, self.config.photometric_radius)
+            elif mode == "highpass":
+                gray = highpass(gray, self.config.photometric_radius)
 
         if index == 0:
             est = VOEstimate(index=0, timestamp=timestamp, delta=np.zeros(3), covariance=np.zeros((3, 3)),
@@ -293,6 +306,7 @@ class VisualOdometry:
             return est
 
         pred, pred_cov = self._prediction(dt, fallback)
+        self._predicted = fallback is not None or self._velocity is not None
         est = None
         if gray is not None and self._kf is not None:
             est = self._match_keyframe(gray, index, timestamp, dt, pred)
@@ -313,10 +327,8 @@ class VisualOdometry:
         c = self.config
         if fallback is not None:
             return fallback
-        if self._velocity is not None:
-            pred = self._velocity * dt
-        else:
-            pred = np.zeros(3)
+        # without any motion source the guess is "no motion", flagged by self._predicted = False
+        pred = self._velocity * dt if self._velocity is not None else np.zeros(3)
         return pred, np.diag([c.lost_sigma_xy ** 2, c.lost_sigma_xy ** 2, c.lost_sigma_theta ** 2])
 
     def _start_keyframe(self, gray: np.ndarray, index: int, timestamp: float,
@@ -328,28 +340,37 @@ class VisualOdometry:
             if reason_out is not None and not reason_out.reason:
                 reason_out.reason = f"too few corners for a keyframe ({len(pts)} < {c.min_features})"
             return False
-        self._kf = _Keyframe(index=index, timestamp=timestamp, gray=gray, pts=pts,
-                             floor=self.camera.pixel_to_floor(pts))
+        xn = self.camera.normalize(pts)
+        self._kf = _Keyframe(index=index, timestamp=timestamp, gray=gray, pts=pts, xn=xn,
+                             floor=self.camera.rays_to_floor(xn))
         self._t_kp = np.zeros(3)
         self._c_kp = np.zeros((3, 3))
         self._c_kp_fit = np.zeros((3, 3))
         self._prev_px = pts
         return True
 
-    def _fit(self, src_floor: np.ndarray, dst_floor: np.ndarray) -> RigidFit | None:
+    def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray,
+             ref_floor: np.ndarray) -> RigidFit | None:
+        """RANSAC + Kabsch on floor points (cur -> ref), then the tilt-aware refinement on the inliers."""
         c = self.config
         t0 = time.perf_counter()
-        fit = ransac_rigid_2d(src_floor, dst_floor, c.ransac_threshold_px * self._m_per_px, rng=self._rng,
+        fit = ransac_rigid_2d(cur_floor, ref_floor, c.ransac_threshold_px * self._m_per_px, rng=self._rng,
                               max_iterations=c.ransac_iterations, confidence=c.ransac_confidence,
                               sigma_floor=c.pixel_sigma * self._m_per_px)
+        if fit is not None and fit.n_inliers >= c.min_inliers and fit.inlier_ratio >= c.min_inlier_ratio \
+                and c.refine_tilt:
+            tf = refine_planar_tilt(self.camera, ref_xn[fit.inliers], cur_xn[fit.inliers], fit.delta,
+                                    c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px)
+            if tf is not None:
+                fit.delta, fit.covariance, fit.rms, fit.sigma = tf.delta, tf.covariance, tf.rms, tf.sigma
         self._fit_seconds += time.perf_counter() - t0
         if fit is None or fit.n_inliers < c.min_inliers or fit.inlier_ratio < c.min_inlier_ratio:
             return None
         fit.covariance = fit.covariance * c.covariance_scale
         return fit
 
-    def _track(self, ref_gray: np.ndarray, ref_px: np.ndarray, ref_floor: np.ndarray, gray: np.ndarray,
-               t_ref_cur: np.ndarray, shift: np.ndarray | None = None
+    def _track(self, ref_gray: np.ndarray, ref_px: np.ndarray, ref_xn: np.ndarray, ref_floor: np.ndarray,
+               gray: np.ndarray, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None
                ) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
         """LK from a reference frame, started at the positions predicted by the motion t_ref_cur (or by a global
         image `shift` when given); then the robust fit."""
@@ -362,23 +383,33 @@ class VisualOdometry:
         w, h = self.camera.size
         m = 2 * c.border
         visible = (guess[:, 0] > -m) & (guess[:, 0] < w + m) & (guess[:, 1] > -m) & (guess[:, 1] < h + m)
-        ref_px, ref_floor, guess = ref_px[visible], ref_floor[visible], guess[visible]
-        cur_px, ok = track_lk(ref_gray, gray, ref_px, guess, c.lk_window, c.lk_levels, c.lk_iterations,
-                              c.lk_epsilon, c.lk_min_eig)
-        ref_px, ref_floor, cur_px = ref_px[ok], ref_floor[ok], cur_px[ok]
+        ref_px, ref_xn, ref_floor, guess = ref_px[visible], ref_xn[visible], ref_floor[visible], guess[visible]
+        cur_px, ok = track_lk(ref_gray, gray, ref_px, guess, c.lk_window, c.lk_levels if levels is None else levels,
+                              c.lk_iterations, c.lk_epsilon, c.lk_min_eig)
+        ref_px, ref_xn, ref_floor, cur_px = ref_px[ok], ref_xn[ok], ref_floor[ok], cur_px[ok]
         if len(cur_px) < c.min_inliers:
             return None, ref_px, cur_px, np.zeros(len(cur_px), bool)
-        fit = self._fit(self.camera.pixel_to_floor(cur_px), ref_floor)
+        cur_xn = self.camera.normalize(cur_px)
+        fit = self._fit(cur_xn, ref_xn, self.camera.rays_to_floor(cur_xn), ref_floor)
         return fit, ref_px, cur_px, (fit.inliers if fit is not None else np.zeros(len(cur_px), bool))
 
-    def _track_with_retry(self, ref_gray, ref_px, ref_floor, gray, t_ref_cur):
-        """Track from the motion prediction; if that fails, retry once from a phase-correlation shift (the
-        prediction may be missing or wrong: first frames, wheel slip, a dropped frame)."""
-        out = self._track(ref_gray, ref_px, ref_floor, gray, t_ref_cur)
-        if out[0] is None and self.config.coarse_retry:
+    def _track_with_retry(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur):
+        """Track from the motion prediction; if that fails (or there is none), retry from a phase-correlation shift
+        with a deeper LK pyramid: the prediction may be missing or wrong (first frames, wheel slip, a dropped
+        frame) and the shift ignores rotation."""
+        c = self.config
+        deep = max(c.lk_levels, c.retry_levels)
+        out = (None,) if t_ref_cur is None else self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur)
+        if out[0] is None and t_ref_cur is not None and deep > c.lk_levels:
+            # a poor prediction (slip, failed frames in between): the same start with a wider capture range
+            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep)
+        if out[0] is None and c.coarse_retry:
             shift, response = coarse_shift(ref_gray, gray)
-            if response > self.config.coarse_min_response:
-                out = self._track(ref_gray, ref_px, ref_floor, gray, t_ref_cur, shift=shift)
+            if response > c.coarse_min_response:
+                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), shift=shift, levels=deep)
+        if out[0] is None and t_ref_cur is None:
+            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3),
+                              levels=max(c.lk_levels, c.retry_levels))
         return out
 
     def _model_covariance(self, dt: float, motion: np.ndarray) -> np.ndarray:
@@ -391,12 +422,14 @@ class VisualOdometry:
 
     def _match_keyframe(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
         kf = self._kf
-        t_kc_pred = compose(self._t_kp, pred)
-        fit, ref_px, cur_px, inl = self._track_with_retry(kf.gray, kf.pts, kf.floor, gray, t_kc_pred)
+        t_kc_pred = compose(self._t_kp, pred) if self._predicted else None
+        fit, ref_px, cur_px, inl = self._track_with_retry(kf.gray, kf.pts, kf.xn, kf.floor, gray, t_kc_pred)
         if fit is None:
             return None
-        c_kc = fit.covariance + self._model_covariance(timestamp - kf.timestamp, fit.delta)
-        if self._c_kp_fit is not None:
+        tilt = self.config.refine_tilt  # the fit's covariance already covers the wobble
+        c_kc = fit.covariance if tilt else fit.covariance + self._model_covariance(timestamp - kf.timestamp,
+                                                                                    fit.delta)
+        if self._c_kp_fit is not None and not tilt:
             # previous frame measured from the same keyframe: their wobble errors are mostly shared and cancel
             delta, cov = between_with_covariance(self._t_kp, self._c_kp_fit, fit.delta, fit.covariance)
             cov = cov + self._model_covariance(dt, delta)
@@ -417,11 +450,13 @@ class VisualOdometry:
 
     def _match_previous(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
         prev_px = self._prev_px
-        fit, ref_px, cur_px, _ = self._track_with_retry(self._prev_gray, prev_px,
-                                                        self.camera.pixel_to_floor(prev_px), gray, pred)
+        prev_xn = self.camera.normalize(prev_px)
+        fit, ref_px, cur_px, _ = self._track_with_retry(self._prev_gray, prev_px, prev_xn,
+                                                        self.camera.rays_to_floor(prev_xn), gray,
+                                                        pred if self._predicted else None)
         if fit is None:
             return None
-        cov = fit.covariance + self._model_covariance(dt, fit.delta)
+        cov = fit.covariance if self.config.refine_tilt else fit.covariance + self._model_covariance(dt, fit.delta)
         est = self._estimate(index, timestamp, fit.delta, cov, Reference.PREVIOUS, fit, ref_px, cur_px)
         # the keyframe could not be tracked: this frame replaces it
         if self._start_keyframe(gray, index, timestamp):
