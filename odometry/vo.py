@@ -35,7 +35,7 @@ from odometry.tilt_refine import refine_planar_tilt
 from odometry.tracking import (BadImage, coarse_shift, contrast, detect_corners, highpass, normalize, normalize_local,
                                to_gray, track_lk)
 
-__all__ = ["VOConfig", "VOEstimate", "VOStatus", "VOTrajectory", "Reference", "VisualOdometry",
+__all__ = ["Photometric", "Reference", "VOConfig", "VOEstimate", "VOStatus", "VOTrajectory", "VisualOdometry",
            "run_visual_odometry"]
 
 
@@ -46,6 +46,15 @@ class VOStatus(str, Enum):
     OK = "ok"              # measured by vision
     FALLBACK = "fallback"  # vision failed: the given fallback motion (fused wheel/gyro), covariance inflated
     LOST = "lost"          # vision failed and no fallback: constant-velocity guess with a large covariance
+
+
+class Photometric(str, Enum):
+    """How frames are normalised before LK (brightness constancy against lighting changes and vignetting)."""
+
+    NONE = "none"
+    GLOBAL = "global"       # gain and offset of the whole frame
+    HIGHPASS = "highpass"   # minus the local box mean: removes smooth light fields (default; 0.3 ms)
+    LOCAL = "local"         # local mean and contrast: the most invariant, ~10x the cost of HIGHPASS
 
 
 class Reference(str, Enum):
@@ -85,7 +94,7 @@ class VOConfig:
     lk_iterations: int = 20
     lk_epsilon: float = 0.02
     lk_min_eig: float = 1e-3
-    photometric: str = "highpass"
+    photometric: Photometric = Photometric.HIGHPASS
     photometric_radius: int = 8
     min_contrast: float = 2.0
     min_features: int = 25
@@ -114,9 +123,10 @@ class VOConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "photometric", Photometric(self.photometric))
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, (bool, str)) or f.name == "grid":
+            if isinstance(v, (bool, Enum)) or f.name == "grid":
                 continue
             if not math.isfinite(v) or v < 0:
                 raise ValueError(f"VOConfig.{f.name} must be a finite number >= 0, got {v!r}")
@@ -289,11 +299,11 @@ class VisualOdometry:
             gray, reason = None, str(exc)
         if gray is not None:
             mode = self.config.photometric
-            if mode == "global":
+            if mode == Photometric.GLOBAL:
                 gray = normalize(gray)
-            elif mode == "local":
+            elif mode == Photometric.LOCAL:
                 gray = normalize_local(gray, self.config.photometric_radius)
-            elif mode == "highpass":
+            elif mode == Photometric.HIGHPASS:
                 gray = highpass(gray, self.config.photometric_radius)
 
         if index == 0:

@@ -194,3 +194,21 @@ def test_batch_survives_an_image_getter_that_raises(tex):
     assert traj.status[4] == VOStatus.LOST and "cannot be decoded" in traj.reason[4]
     assert all(s == VOStatus.OK for s in traj.status[5:])
     assert traj.poses.shape == (10, 3) and np.all(np.isfinite(traj.poses))
+
+
+def test_previous_frame_is_matched_when_the_keyframe_cannot_be(tex):
+    """If the keyframe stops matching (here: its stored template is wrecked), the previous frame is used and
+    the current frame becomes the new keyframe."""
+    cam = camera()
+    r = FloorRenderer(cam, tex, 0.001)
+    poses = _arc(12)
+    vo = VisualOdometry(cam)
+    for i in range(6):
+        assert vo.process(r.render(poses[i]), i / FPS).status in (VOStatus.INIT, VOStatus.OK)
+    kf = vo._kf
+    kf.gray = np.random.default_rng(0).integers(0, 256, kf.gray.shape, dtype=np.uint8)  # unmatchable template
+    est = vo.process(r.render(poses[6]), 6 / FPS)
+    assert est.status == VOStatus.OK and est.reference == Reference.PREVIOUS and est.is_keyframe
+    assert np.hypot(*_err(est.delta, between(poses[5], poses[6]))[:2]) < 3e-4
+    nxt = vo.process(r.render(poses[7]), 7 / FPS)
+    assert nxt.status == VOStatus.OK and nxt.reference == Reference.KEYFRAME and nxt.keyframe_index == 6

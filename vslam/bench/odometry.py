@@ -41,6 +41,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", default="default", help="VOConfig preset: default, fast, accurate")
     p.add_argument("--threads", type=int, default=1,
                    help="OpenCV threads (default 1: the machine is shared; the VO itself is single-threaded)")
+    p.add_argument("--faults", type=float, default=0.03, metavar="P",
+                   help="also run a carpet sequence with this probability of dropped and of corrupt frames "
+                        "(reported separately; 0 to skip)")
     p.add_argument("--data", default=None, help="keep the simulated sequences here and reuse them on later runs")
     p.add_argument("--out", default=None, help="write the results as JSON here")
 
@@ -118,13 +121,16 @@ class _AffineBaseline:
         self.seconds.append(dt)
 
 
-def _simulate(floor: str, trajectory: str, frames: int, seed: int, where: Path) -> Path:
-    from vslam.sim import SimConfig, simulate
+def _simulate(floor: str, trajectory: str, frames: int, seed: int, where: Path, faults: float = 0.0) -> Path:
+    from dataclasses import replace
+
+    from vslam.sim import Effects, SimConfig, simulate
     from vslam.sim.simulate import length_for_frames
 
-    cfg = SimConfig(floor=floor, trajectory=trajectory, seed=seed, max_frames=frames,
+    effects = replace(Effects(), dropped_frames=faults, corrupt_frames=faults)  # blur, lighting etc. stay on
+    cfg = SimConfig(floor=floor, trajectory=trajectory, seed=seed, max_frames=frames, effects=effects,
                     length=length_for_frames(frames, SimConfig.fps, SimConfig.speed))
-    out = where / f"{floor}_{trajectory}_{frames}_s{seed}"
+    out = where / (f"{floor}_{trajectory}_{frames}_s{seed}" + (f"_faults{faults:g}" if faults > 0 else ""))
     if not (out / "frames.csv").is_file():
         simulate(cfg, out, overwrite=True)
     return out
@@ -203,17 +209,20 @@ def run(args: argparse.Namespace) -> int:
     else:
         tmp = tempfile.TemporaryDirectory(prefix="vslam-bench-odometry-")
         where = Path(tmp.name)
+    runs = [(floor, TRAJECTORIES[k % len(TRAJECTORIES)], args.seed + k, 0.0) for k, floor in enumerate(floors)]
+    if args.faults > 0 and not args.quick:
+        runs.append(("carpet", "random", args.seed + len(floors), args.faults))
     results = []
     try:
-        for k, floor in enumerate(floors):
-            traj = TRAJECTORIES[k % len(TRAJECTORIES)]
+        for floor, traj, seed, faults in runs:
             t0 = time.perf_counter()
-            path = _simulate(floor, traj, frames, args.seed + k, where)
+            path = _simulate(floor, traj, frames, seed, where, faults)
             t1 = time.perf_counter()
             r = run_sequence(path, args.preset)
-            r.update(floor=floor, trajectory=traj, simulate_s=t1 - t0, run_s=time.perf_counter() - t1)
+            label = floor if faults == 0 else f"{floor} + {faults:.0%} dropped + {faults:.0%} corrupt frames"
+            r.update(floor=label, trajectory=traj, simulate_s=t1 - t0, run_s=time.perf_counter() - t1)
             results.append(r)
-            print(f"{floor:>12} {traj:>9}: VO {r['vo']['segment_drift_pct']:.3f} % "
+            print(f"{label:>12} {traj:>9}: VO {r['vo']['segment_drift_pct']:.3f} % "
                   f"(end {r['vo']['end_drift_pct']:.3f} %), fusion {r['fusion']['segment_drift_pct']:.3f} %, "
                   f"affine {r['affine']['segment_drift_pct']:.3f} %, VO {r['vo']['fps']:.0f} frames/s, "
                   f"status {r['status']}", flush=True)
