@@ -75,12 +75,13 @@ class VOConfig:
     `keyframe_min_fraction` of its corners remain inliers, or the rotation since it exceeds
     `keyframe_max_rotation` (LK windows do not rotate).
 
-    Covariance: the fit's residual-based covariance (never below `pixel_sigma`, times `covariance_scale`) plus
-    what the planar model cannot see: the robot pitches and rolls (`tilt_sigma`, rad) and bounces
-    (`height_sigma`, m), which shifts the whole image like a translation of camera_height * tilt. These errors
-    are slow (correlation time `wobble_time`, s), so between two frames dt apart only a fraction
-    2 (1 - exp(-dt / wobble_time)) of their variance appears; `tilt_rotation_coupling` is the heading error per
-    radian of tilt (perspective of the tilted view). Fallback covariances are multiplied by `fallback_inflation`.
+    Covariance: sigma^2 (J^T J)^-1 of the fit (residual-based, sigma never below `pixel_sigma`, times
+    `covariance_scale`). With `refine_tilt` the robot's pitch, roll (prior `tilt_sigma`, rad) and bounce (prior
+    `height_sigma`, m) are estimated with the motion and marginalised into it. Without it, their effect is added
+    as a model term: a tilt shifts the whole view like a translation of camera_height * tilt, slowly
+    (correlation time `wobble_time`, s), so between frames dt apart a fraction 2 (1 - exp(-dt / wobble_time)) of
+    that variance appears; `tilt_rotation_coupling` is the heading error per radian of tilt. Fallback
+    covariances are multiplied by `fallback_inflation`.
     """
 
     max_features: int = 200
@@ -143,14 +144,14 @@ class VOConfig:
 
     @classmethod
     def fast(cls) -> "VOConfig":
-        """Fewer corners and a smaller LK window: for slow robots or small images."""
-        return cls(max_features=120, lk_window=15, lk_levels=2, keyframe_min_inliers=40)
+        """Fewer corners and a plain rigid fit (no tilt refinement): about twice the speed, more drift."""
+        return cls(max_features=120, refine_tilt=False, keyframe_min_inliers=40, ransac_iterations=100)
 
     @classmethod
     def accurate(cls) -> "VOConfig":
-        """More corners and a full-resolution detector: lower drift, about twice the cost."""
-        return cls(max_features=400, half_resolution_detection=False, min_distance=10.0, lk_iterations=30,
-                   lk_epsilon=0.01, keyframe_min_inliers=80)
+        """More corners, a full-resolution detector, a larger LK window and local contrast normalisation."""
+        return cls(max_features=300, half_resolution_detection=False, min_distance=12.0, lk_window=21,
+                   lk_iterations=30, lk_epsilon=0.01, photometric=Photometric.LOCAL, keyframe_min_inliers=80)
 
     @classmethod
     def preset(cls, name: str) -> "VOConfig":
@@ -220,11 +221,20 @@ class VOEstimate:
         return self.matches[self.inliers]
 
 
+@dataclass(frozen=True)
+class _Images:
+    """A frame prepared for LK: `fine` is photometrically normalised for precise single-level tracking; `coarse`
+    keeps the low frequencies (gain/offset normalised only) that the coarse levels of a deep pyramid need."""
+
+    fine: np.ndarray
+    coarse: np.ndarray
+
+
 @dataclass
 class _Keyframe:
     index: int
     timestamp: float
-    gray: np.ndarray     # normalised grey image (LK template)
+    gray: _Images        # LK templates
     pts: np.ndarray      # (N, 2) float32 corner pixels
     xn: np.ndarray       # (N, 2) their undistorted normalised coordinates
     floor: np.ndarray    # (N, 2) their floor points in the keyframe's base frame
@@ -255,7 +265,7 @@ class VisualOdometry:
         self._t_kp = np.zeros(3)                  # pose of the previous frame in the keyframe frame
         self._c_kp = np.zeros((3, 3))             # its full covariance
         self._c_kp_fit: np.ndarray | None = None  # its fit-only covariance when vision measured it from this keyframe
-        self._prev_gray: np.ndarray | None = None
+        self._prev_gray: _Images | None = None
         self._prev_px: np.ndarray | None = None   # tracked keyframe corners in the previous frame (inliers)
         self._failures = 0                        # consecutive frames vision could not measure
         self._fit_seconds = 0.0
@@ -298,13 +308,7 @@ class VisualOdometry:
         except BadImage as exc:
             gray, reason = None, str(exc)
         if gray is not None:
-            mode = self.config.photometric
-            if mode == Photometric.GLOBAL:
-                gray = normalize(gray)
-            elif mode == Photometric.LOCAL:
-                gray = normalize_local(gray, self.config.photometric_radius)
-            elif mode == Photometric.HIGHPASS:
-                gray = highpass(gray, self.config.photometric_radius)
+            gray = self._prepare(gray)
 
         if index == 0:
             est = VOEstimate(index=0, timestamp=timestamp, delta=np.zeros(3), covariance=np.zeros((3, 3)),
@@ -333,6 +337,15 @@ class VisualOdometry:
         return est
 
     # ------------------------------------------------------------------ pieces
+    def _prepare(self, gray: np.ndarray) -> _Images:
+        mode, radius = self.config.photometric, self.config.photometric_radius
+        coarse = normalize(gray)
+        if mode == Photometric.LOCAL:
+            return _Images(normalize_local(gray, radius), coarse)
+        if mode == Photometric.HIGHPASS:
+            return _Images(highpass(gray, radius), coarse)
+        return _Images(coarse if mode == Photometric.GLOBAL else gray, coarse)
+
     def _prediction(self, dt: float, fallback) -> tuple[np.ndarray, np.ndarray]:
         c = self.config
         if fallback is not None:
@@ -341,10 +354,10 @@ class VisualOdometry:
         pred = self._velocity * dt if self._velocity is not None else np.zeros(3)
         return pred, np.diag([c.lost_sigma_xy ** 2, c.lost_sigma_xy ** 2, c.lost_sigma_theta ** 2])
 
-    def _start_keyframe(self, gray: np.ndarray, index: int, timestamp: float,
+    def _start_keyframe(self, gray: _Images, index: int, timestamp: float,
                         reason_out: VOEstimate | None = None) -> bool:
         c = self.config
-        pts = detect_corners(gray, c.max_features, c.grid, c.quality, c.min_distance, c.border,
+        pts = detect_corners(gray.fine, c.max_features, c.grid, c.quality, c.min_distance, c.border,
                              c.half_resolution_detection)
         if len(pts) < c.min_features:
             if reason_out is not None and not reason_out.reason:
@@ -379,8 +392,8 @@ class VisualOdometry:
         fit.covariance = fit.covariance * c.covariance_scale
         return fit
 
-    def _track(self, ref_gray: np.ndarray, ref_px: np.ndarray, ref_xn: np.ndarray, ref_floor: np.ndarray,
-               gray: np.ndarray, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None
+    def _track(self, ref_gray: _Images, ref_px: np.ndarray, ref_xn: np.ndarray, ref_floor: np.ndarray,
+               gray: _Images, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None
                ) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
         """LK from a reference frame, started at the positions predicted by the motion t_ref_cur (or by a global
         image `shift` when given); then the robust fit."""
@@ -394,8 +407,13 @@ class VisualOdometry:
         m = 2 * c.border
         visible = (guess[:, 0] > -m) & (guess[:, 0] < w + m) & (guess[:, 1] > -m) & (guess[:, 1] < h + m)
         ref_px, ref_xn, ref_floor, guess = ref_px[visible], ref_xn[visible], ref_floor[visible], guess[visible]
-        cur_px, ok = track_lk(ref_gray, gray, ref_px, guess, c.lk_window, c.lk_levels if levels is None else levels,
-                              c.lk_iterations, c.lk_epsilon, c.lk_min_eig)
+        if levels is not None and levels > c.lk_levels:
+            # a wide capture range first, on images that keep their low frequencies, then the precise pass
+            coarse_px, coarse_ok = track_lk(ref_gray.coarse, gray.coarse, ref_px, guess, c.lk_window, levels,
+                                            c.lk_iterations, c.lk_epsilon, c.lk_min_eig)
+            guess = np.where(coarse_ok[:, None], coarse_px, guess)
+        cur_px, ok = track_lk(ref_gray.fine, gray.fine, ref_px, guess, c.lk_window, c.lk_levels, c.lk_iterations,
+                              c.lk_epsilon, c.lk_min_eig)
         ref_px, ref_xn, ref_floor, cur_px = ref_px[ok], ref_xn[ok], ref_floor[ok], cur_px[ok]
         if len(cur_px) < c.min_inliers:
             return None, ref_px, cur_px, np.zeros(len(cur_px), bool)
@@ -414,7 +432,7 @@ class VisualOdometry:
             # a poor prediction (slip, failed frames in between): the same start with a wider capture range
             out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep)
         if out[0] is None and c.coarse_retry:
-            shift, response = coarse_shift(ref_gray, gray)
+            shift, response = coarse_shift(ref_gray.coarse, gray.coarse)
             if response > c.coarse_min_response:
                 out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), shift=shift, levels=deep)
         if out[0] is None and t_ref_cur is None:

@@ -205,8 +205,8 @@ def test_previous_frame_is_matched_when_the_keyframe_cannot_be(tex):
     vo = VisualOdometry(cam)
     for i in range(6):
         assert vo.process(r.render(poses[i]), i / FPS).status in (VOStatus.INIT, VOStatus.OK)
-    kf = vo._kf
-    kf.gray = np.random.default_rng(0).integers(0, 256, kf.gray.shape, dtype=np.uint8)  # unmatchable template
+    noise = np.random.default_rng(0).integers(0, 256, (480, 640), dtype=np.uint8)
+    vo._kf.gray = type(vo._kf.gray)(noise, noise)  # an unmatchable template
     est = vo.process(r.render(poses[6]), 6 / FPS)
     assert est.status == VOStatus.OK and est.reference == Reference.PREVIOUS and est.is_keyframe
     assert np.hypot(*_err(est.delta, between(poses[5], poses[6]))[:2]) < 3e-4

@@ -209,7 +209,7 @@ def frontend_comparison(path: Path, pairs: int = 60, seed: int = 0) -> list[dict
 
     from odometry.fusion import fuse_wheel_gyro
     from odometry.rigid import ransac_rigid_2d
-    from odometry.tracking import detect_corners, highpass, track_lk
+    from odometry.tracking import detect_corners, highpass, normalize, track_lk
     from vslam.io import open_sequence
 
     seq = open_sequence(path)
@@ -253,7 +253,9 @@ def frontend_comparison(path: Path, pairs: int = 60, seed: int = 0) -> list[dict
                 pa, pb, state = orb_pairs(a, b, state)
                 times.append(time.perf_counter() - t0)
             else:
-                ha, hb = highpass(a), highpass(b)
+                ours = name.startswith("ours")
+                # ours: high-passed frames, single level; the classic pyramid needs the low frequencies
+                ha, hb = (highpass(a), highpass(b)) if ours else (normalize(a), normalize(b))
                 pa = detect_corners(ha, 200, (8, 6), 0.01, 14.0, 16, True)
                 guess = predicted(k - 1, k, pa) if name.startswith("ours") else None
                 levels = 0 if name.startswith("ours") else 3
