@@ -108,8 +108,11 @@ class LandmarkMemory:
         return load_memory(path)
 
 
+# Storage dtypes on disk, and the dtypes features have in memory.
 _FEATURE_FIELDS = {"x": np.float64, "scale": np.float64, "level": np.int16, "sign": np.int8,
                    "response": np.float32, "descriptor": np.float32}
+_RUNTIME_DTYPES = {"x": np.float64, "scale": np.float64, "level": np.intp, "sign": np.int8,
+                   "response": np.float64, "descriptor": np.float32}
 
 
 def save_memory(memory: LandmarkMemory, path: str | os.PathLike) -> None:
@@ -187,7 +190,7 @@ def load_memory(path: str | os.PathLike) -> LandmarkMemory:
     starts = ends - counts
     for i in range(n_lm):
         sl = slice(int(starts[i]), int(ends[i]))
-        feats = HorizonFeatures(**{k: data[k][sl].astype(t, copy=False) for k, t in _FEATURE_FIELDS.items()},
+        feats = HorizonFeatures(**{k: data[k][sl].astype(t) for k, t in _RUNTIME_DTYPES.items()},
                                 width=int(data["widths"][i]))
         h = data["horizons"][i]
         memory.add(str(names[i]), feats, str(data["sources"][i]), HorizonLine(float(h[0]), float(h[1])))

@@ -46,7 +46,7 @@ class HorizonFeatures:
 
     @classmethod
     def empty(cls, width: int = 0, dim: int = 6) -> "HorizonFeatures":
-        return cls(np.zeros(0), np.zeros(0), np.zeros(0, np.int16), np.zeros(0, np.int8), np.zeros(0, np.float32),
+        return cls(np.zeros(0), np.zeros(0), np.zeros(0, np.intp), np.zeros(0, np.int8), np.zeros(0),
                    np.zeros((0, dim), np.float32), int(width))
 
     @functools.cached_property

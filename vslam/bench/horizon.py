@@ -282,23 +282,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="OpenCV threads for SIFT; 1 compares single core with single core (default: 1)")
 
 
-def parse_overrides(params, overrides: list[str]):
-    """Apply FIELD=VALUE strings to a HorizonParams (values parsed as JSON, else kept as text)."""
-    changes = {}
-    for item in overrides:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
-        try:
-            changes[key.strip()] = json.loads(value)
-        except json.JSONDecodeError:
-            changes[key.strip()] = value
-    unknown = sorted(set(changes) - set(params.to_dict()))
-    if unknown:
-        raise ValueError(f"--set: unknown HorizonParams field(s): {', '.join(unknown)}")
-    return params.replace(**changes)
-
-
 def _auc_or_nan(scores, labels) -> float:
     from loops.horizon import auc
 
@@ -312,7 +295,7 @@ def run(args: argparse.Namespace) -> int:
     from loops.horizon import HorizonParams, extract_features, match, roc_curve, tpr_at_fpr
     from odometry.atomic_io import atomic_path
     from vslam.bench._common import format_table, write_json
-    from vslam.cli.cmd_horizon import score_pairs_file
+    from vslam.cli.cmd_horizon import parse_overrides, score_pairs_file
     from vslam.paths import shared_data_dir
 
     data_dir = shared_data_dir(required=True)

@@ -39,9 +39,25 @@ def parse_horizon(text: str, where: str):
     return vals[0] if len(vals) == 1 else HorizonLine(vals[0], vals[1])
 
 
+def parse_overrides(params, overrides: list[str]):
+    """Apply FIELD=VALUE strings to a HorizonParams (values parsed as JSON, else kept as text)."""
+    changes = {}
+    for item in overrides:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
+        try:
+            changes[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            changes[key.strip()] = value
+    unknown = sorted(set(changes) - set(params.to_dict()))
+    if unknown:
+        raise ValueError(f"--set: unknown HorizonParams field(s): {', '.join(unknown)}")
+    return params.replace(**changes)
+
+
 def _params_from_args(args: argparse.Namespace):
     from loops.horizon import HorizonParams
-    from vslam.bench.horizon import parse_overrides
 
     return parse_overrides(HorizonParams.preset(args.preset), args.overrides)
 
@@ -258,6 +274,7 @@ def _add_params_args(p: argparse.ArgumentParser) -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter  # keep the usage block of the description
     sub = parser.add_subparsers(dest="horizon_command", metavar="ACTION")
     sub.required = True
 
