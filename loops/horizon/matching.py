@@ -12,6 +12,7 @@ import numpy as np
 from loops.horizon.params import HorizonParams
 from loops.horizon.surf1d import SIGN_WEIGHT, HorizonFeatures
 
+
 @dataclass(frozen=True)
 class MatchResult:
     """Outcome of matching a test horizon against a stored one.

@@ -1,8 +1,9 @@
 """1D SURF: box-filter second derivatives over a 1D integral signal, extrema in space, 6-number descriptors.
 
-Everything runs on whole arrays: one integral signal, every box-filter response as one (levels, samples) array,
-extrema by array comparisons, all descriptors by one gather. The index tables depend only on the signal length
-and the parameters, so they are built once and cached (a robot's horizon has the same length every frame).
+Everything runs on whole arrays, all scales at once: one integral signal; every box-filter response at every
+(level, position) candidate from one gather and one small matrix product; extrema by array comparisons; all
+descriptors from one gather and two matrix products. The index tables depend only on the signal length and the
+parameters, so they are built once and cached (a robot's horizon has the same length every frame).
 
 Differences from 2D SURF, as in the paper: the "Hessian" is the second derivative alone; extrema are sought in
 space only (each scale level on its own, no 3x3x3 test); no orientation; no sub-sample interpolation.

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -234,31 +233,6 @@ def _kitti_pairs_csv(data_dir: Path, out_csv: Path) -> Path:
     return out_csv
 
 
-def _roc_png(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray, float]], title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from odometry.atomic_io import atomic_path
-
-    fig, ax = plt.subplots(figsize=(4.8, 4.2), dpi=100)
-    for name, (fpr, tpr, a) in curves.items():
-        ax.plot(fpr, tpr, label=f"{name} (AUC {a:.3f})", lw=1.5)
-    ax.plot([0, 1], [0, 1], ":", color="grey", lw=0.8)
-    ax.set_xlabel("false positive rate (1 - specificity)")
-    ax.set_ylabel("true positive rate (sensitivity)")
-    ax.set_title(title, fontsize=9)
-    ax.legend(loc="lower right", fontsize=8)
-    ax.set_xlim(0, 1)
-    ax.set_ylim(0, 1.01)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp)
-    plt.close(fig)
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("out/bench_horizon"),
                         help="output folder: horizon.json, roc.png, bank_scores.csv, kitti_pairs*.csv "
@@ -295,7 +269,7 @@ def run(args: argparse.Namespace) -> int:
     from loops.horizon import HorizonParams, extract_features, match, roc_curve, tpr_at_fpr
     from odometry.atomic_io import atomic_path
     from vslam.bench._common import format_table, write_json
-    from vslam.cli.cmd_horizon import parse_overrides, score_pairs_file
+    from vslam.cli.cmd_horizon import parse_overrides, score_pairs_file, write_roc_png
     from vslam.paths import shared_data_dir
 
     data_dir = shared_data_dir(required=True)
@@ -395,7 +369,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"NN+RANSAC at <= 5% false positives: {tpr5:.1%} of matched pairs, score threshold {thr5:.1f}")
 
     args.out.mkdir(parents=True, exist_ok=True)
-    _roc_png(args.out / "roc.png", {k: (*roc_curve(s, y)[:2], aucs[k]) for k, s in scorers.items()},
+    write_roc_png(args.out / "roc.png", {k: (*roc_curve(s, y)[:2], aucs[k]) for k, s in scorers.items()},
              f"KITTI crop bank: {int(y.sum())} matched / {int((~y).sum())} unmatched pairs")
     with atomic_path(args.out / "bank_scores.csv") as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)

@@ -155,6 +155,32 @@ def score_pairs_file(pairs_csv: Path, out_csv: Path, params) -> list[dict]:
     return out_rows
 
 
+def write_roc_png(path: Path, curves: dict[str, tuple], title: str) -> None:
+    """ROC curves {name: (fpr, tpr, auc)} as a PNG, written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from odometry.atomic_io import atomic_path
+
+    fig, ax = plt.subplots(figsize=(4.8, 4.2), dpi=100)
+    for name, (fpr, tpr, a) in curves.items():
+        ax.plot(fpr, tpr, label=f"{name} (AUC {a:.3f})", lw=1.5)
+    ax.plot([0, 1], [0, 1], ":", color="grey", lw=0.8)
+    ax.set_xlabel("false positive rate (1 - specificity)")
+    ax.set_ylabel("true positive rate (sensitivity)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc="lower right", fontsize=8)
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.01)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp)
+    plt.close(fig)
+
+
 # --- sub-commands ---------------------------------------------------------------------------------------------
 
 def _memorise(args: argparse.Namespace) -> int:
@@ -260,9 +286,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(f"{name:10s} AUC {a:.3f}; at <= {args.max_fpr:.0%} false positives: {tpr:.1%} matched, "
               f"threshold {thr:.4g}")
     if args.plot:
-        from vslam.bench.horizon import _roc_png
-
-        _roc_png(args.plot, curves, f"{path.name}: {int(y.sum())} matched / {int((~y).sum())} unmatched")
+        write_roc_png(args.plot, curves, f"{path.name}: {int(y.sum())} matched / {int((~y).sum())} unmatched")
         print(f"wrote {args.plot}")
     return 0
 
@@ -298,7 +322,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser("pairs", help="score image pairs: PAIRS.csv (a,b,row_a,row_b) -> SCORES.csv")
     p.add_argument("pairs", type=Path, help="CSV with columns a,b,row_a,row_b (other columns are copied)")
-    p.add_argument("--out", type=Path, required=True, help="CSV to write: the input columns + score,score_ransac,b_s,b_d")
+    p.add_argument("--out", type=Path, required=True,
+                   help="CSV to write: the input columns + score,score_ransac,b_s,b_d")
     _add_params_args(p)
     p.set_defaults(func=_pairs)
 
