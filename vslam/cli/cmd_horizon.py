@@ -223,17 +223,19 @@ def _recognise(args: argparse.Namespace) -> int:
         feats = _extract(path, horizon, memory.params)
         rec = memory.recognise(feats, args.threshold)
         res = rec.result
-        line = {"image": str(path), "landmark": rec.name, "best": rec.best, "score_ransac": rec.score,
-                "score": res.score if res else 0.0, "b_s": res.b_s if res else math.nan,
-                "b_d": res.b_d if res else math.nan, "threshold": rec.threshold, "scores": rec.scores}
-        out.append(line)
+        b_s = res.b_s if res else math.nan
+        b_d = res.b_d if res else math.nan
+        score_nn = res.score if res else 0.0
         verdict = f"landmark {rec.name}" if rec.name else "no landmark"
-        print(f"{path}: {verdict} (best {rec.best}: score {rec.score:.1f} NN+RANSAC, {line['score']:.1f} NN, "
-              f"b_s {line['b_s']:.3f}, b_d {line['b_d']:.1f} px; threshold {rec.threshold:g})")
+        print(f"{path}: {verdict} (best {rec.best}: score {rec.score:.1f} NN+RANSAC, {score_nn:.1f} NN, "
+              f"b_s {b_s:.3f}, b_d {b_d:.1f} px; threshold {rec.threshold:g})")
+        out.append({"image": str(path), "landmark": rec.name, "best": rec.best, "score_ransac": rec.score,
+                    "score": score_nn, "b_s": None if math.isnan(b_s) else b_s,     # null: no consistent line
+                    "b_d": None if math.isnan(b_d) else b_d, "threshold": rec.threshold, "scores": rec.scores})
     if args.json:
         from odometry.atomic_io import atomic_write_text
 
-        atomic_write_text(args.json, json.dumps(out, indent=2, default=float, allow_nan=True) + "\n")
+        atomic_write_text(args.json, json.dumps(out, indent=2, default=float) + "\n")
     return 0
 
 
