@@ -51,17 +51,17 @@ class Bank:
 
 
 def read_kitti_snippet(folder: Path) -> tuple[dict, np.ndarray, list[Path]]:
-    """(calibration {fx, cx, cy}, (N, 3, 4) camera poses, image paths) of a kitti_snippets folder."""
-    calib_file = folder / "calib.txt"
-    try:
-        p0 = np.array(calib_file.read_text().split()[:12], dtype=np.float64).reshape(3, 4)
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{calib_file}: cannot read the P0 projection matrix ({exc})") from None
-    poses = np.loadtxt(folder / "poses.txt").reshape(-1, 3, 4)
-    images = sorted((folder / "image_l").glob("*.png"))
-    if len(images) != len(poses):
-        raise ValueError(f"{folder}: {len(images)} images but {len(poses)} poses")
-    return {"fx": p0[0, 0], "cx": p0[0, 2], "cy": p0[1, 2]}, poses, images
+    """(calibration {fx, cx, cy}, (N, 3, 4) camera poses, image paths) of a kitti_snippets folder, via the
+    toolkit's KITTI reader."""
+    from odometry.poses import tum_to_se3_matrices
+    from vslam.io import read_kitti
+
+    seq = read_kitti(folder)
+    if seq.groundtruth is None:
+        raise ValueError(f"{folder}: no poses.txt (the bank needs ground-truth headings)")
+    poses = tum_to_se3_matrices(seq.groundtruth.poses)[:, :3, :]
+    cam = seq.camera
+    return {"fx": cam.fx, "cx": cam.cx, "cy": cam.cy}, poses, [seq.images.path(i) for i in range(len(seq))]
 
 
 def _ray_heading(rotation: np.ndarray, u: float, fx: float, cx: float) -> float:
