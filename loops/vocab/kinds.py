@@ -58,19 +58,23 @@ def centres(kind: DescriptorKind, x: np.ndarray, labels: np.ndarray, n_clusters:
             bits: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Cluster centres (n_clusters, D) and cluster sizes. Empty clusters get a zero centre and size 0.
 
-    BINARY centres take the majority bit (ties -> 1, as DBoW2); pass `bits` = np.unpackbits(x, axis=1) when calling
-    repeatedly on the same x.
+    BINARY centres take the majority bit (ties -> 1, as DBoW2); pass `bits` = unpacked_bits(x) when calling
+    repeatedly on the same x. Rows are sorted by cluster once and each cluster's slice summed: no BLAS (whose
+    threads stall on a loaded machine) and no slow scatter-adds.
     """
     order = np.argsort(labels, kind="stable")
     sizes = np.bincount(labels, minlength=n_clusters)
-    starts = np.concatenate(([0], np.cumsum(sizes)[:-1]))
-    nonempty = sizes > 0
+    bounds = np.concatenate(([0], np.cumsum(sizes)))
     if kind is DescriptorKind.BINARY:
-        b = np.unpackbits(x, axis=1) if bits is None else bits
-        sums = np.zeros((n_clusters, b.shape[1]), np.int64)
-        sums[nonempty] = np.add.reduceat(b[order].astype(np.int32), starts[nonempty], axis=0)
-        majority = (2 * sums >= sizes[:, None]) & nonempty[:, None]
-        return np.packbits(majority.astype(np.uint8), axis=1), sizes
-    sums = np.zeros((n_clusters, x.shape[1]), np.float64)
-    sums[nonempty] = np.add.reduceat(x[order].astype(np.float64), starts[nonempty], axis=0)
+        b = (unpacked_bits(x) if bits is None else bits)[order]
+        sums = np.stack([b[bounds[c]:bounds[c + 1]].sum(axis=0, dtype=np.int32) for c in range(n_clusters)])
+        majority = (2 * sums >= sizes[:, None]) & (sizes > 0)[:, None]
+        return np.packbits(majority, axis=1), sizes
+    xs = x[order]
+    sums = np.stack([xs[bounds[c]:bounds[c + 1]].sum(axis=0, dtype=np.float64) for c in range(n_clusters)])
     return (sums / np.maximum(sizes, 1)[:, None]).astype(np.float32), sizes
+
+
+def unpacked_bits(x: np.ndarray) -> np.ndarray:
+    """(n, 8 D) uint8 0/1 matrix of packed bit rows."""
+    return np.unpackbits(x, axis=1)

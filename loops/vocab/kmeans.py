@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kinds import DescriptorKind, centres, distances
+from .kinds import DescriptorKind, centres, distances, unpacked_bits
 
 
 def kmeanspp_seeds(kind: DescriptorKind, x: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
@@ -30,7 +30,7 @@ def kmeans(kind: DescriptorKind, x: np.ndarray, k: int, rng: np.random.Generator
     """Cluster the rows of x into at most k groups. Returns (labels (n,), centres (m, D)) with m <= k non-empty
     clusters and labels = nearest centre, so the training assignment agrees with how queries descend the tree."""
     c = x[kmeanspp_seeds(kind, x, k, rng)].copy()
-    bits = np.unpackbits(x, axis=1) if kind is DescriptorKind.BINARY else None
+    bits = unpacked_bits(x) if kind is DescriptorKind.BINARY else None
     labels = np.argmin(distances(kind, x, c), axis=1)
     for _ in range(iters):
         new_c, sizes = centres(kind, x, labels, len(c), bits)

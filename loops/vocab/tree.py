@@ -100,8 +100,10 @@ def build_tree(descriptors: np.ndarray, k: int, depth: int, seed: int = 0, iters
             continue
         if len(idx) <= k:
             # DBoW2: few descriptors -> each distinct one becomes a child (and a word)
-            _, first = np.unique(x[idx], axis=0, return_index=True)
-            groups = [(x[idx[i]], idx[i:i + 1]) for i in np.sort(first)]
+            first: dict[bytes, int] = {}
+            for i in range(len(idx)):
+                first.setdefault(x[idx[i]].tobytes(), i)
+            groups = [(x[idx[i]], idx[i:i + 1]) for i in sorted(first.values())]
             if len(groups) == 1:
                 continue
         else:
