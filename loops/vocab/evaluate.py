@@ -61,10 +61,14 @@ class Evaluation:
 
 
 def evaluate(memory: VisualMemory, queries: Iterable[tuple[str, np.ndarray, np.ndarray | None]],
-             truth: Mapping[str, Sequence[int]], key_image: Callable[[int], np.ndarray]) -> Evaluation:
-    """queries yields (name, image, mask or None); truth maps a query name to its true key indices; key_image(i)
-    returns key image i (queried against the memory for mu2's key-to-key similarities). The time per query is
-    feature extraction + scoring (image decoding excluded)."""
+             truth: Mapping[str, Sequence[int]], key_image: Callable[[int], np.ndarray] | None = None,
+             key_descriptors: Callable[[int], np.ndarray] | None = None) -> Evaluation:
+    """queries yields (name, image, mask or None); truth maps a query name to its true key indices. For mu2's
+    key-to-key similarities z_l(I*_k), key k is itself queried against the memory: pass key_image(k) (its image),
+    or key_descriptors(k) (its plain-pattern descriptors, saves re-extracting them). The time per query is feature
+    extraction + scoring (image decoding excluded)."""
+    if key_image is None and key_descriptors is None:
+        raise ValueError("evaluate needs key_image or key_descriptors for mu2")
     n = len(memory)
     out = Evaluation(n)
     self_sim: dict[int, np.ndarray] = {}
@@ -72,7 +76,10 @@ def evaluate(memory: VisualMemory, queries: Iterable[tuple[str, np.ndarray, np.n
     def z_of(k: int) -> np.ndarray:
         if k not in self_sim:
             try:
-                self_sim[k] = memory.query(key_image(k), name=memory.key_names[k]).dense_scores(n)
+                if key_descriptors is not None:
+                    self_sim[k] = memory.query_descriptors(key_descriptors(k)).dense_scores(n)
+                else:
+                    self_sim[k] = memory.query(key_image(k), name=memory.key_names[k]).dense_scores(n)
             except NoFeaturesError:
                 self_sim[k] = np.zeros(n)
             if self_sim[k].sum() <= 0:

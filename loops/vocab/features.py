@@ -29,13 +29,14 @@ def is_grayscale(image: np.ndarray) -> bool:
 
 def prepare(image: np.ndarray, params: VocabParams, mask: np.ndarray | None = None
             ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Upscale images whose shorter side is below params.min_image_side (the mask follows)."""
+    """Upscale images whose shorter side is below params.min_image_side (the mask follows). Colour descriptors are
+    left alone: their patches are defined relative to the image size, so upscaling would only cost time."""
     if image is None or image.size == 0:
         raise ValueError("empty image")
     if image.dtype != np.uint8:
         raise ValueError(f"images must be 8-bit, got {image.dtype}")
     side = min(image.shape[:2])
-    if params.min_image_side and side < params.min_image_side:
+    if params.min_image_side and side < params.min_image_side and not params.descriptor.is_color:
         f = params.min_image_side / side
         size = (int(round(image.shape[1] * f)), int(round(image.shape[0] * f)))
         image = cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
