@@ -29,18 +29,11 @@ def list_images(folder: str | Path) -> list[tuple[str, Path]]:
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"{folder}: not a directory")
-    frames = folder / "frames.csv"
-    if frames.is_file():
-        out = []
-        with open(frames, newline="") as f:
-            reader = csv.DictReader(f)
-            if reader.fieldnames is None or "image" not in reader.fieldnames:
-                raise ValueError(f"{frames}: line 1: header must contain an 'image' column")
-            for line, row in enumerate(reader, start=2):
-                rel = (row.get("image") or "").strip()
-                if not rel:
-                    raise ValueError(f"{frames}: line {line}: field 'image' is empty")
-                out.append((rel, folder / rel))
+    if (folder / "frames.csv").is_file():
+        from vslam.io import read_sequence_dir
+
+        seq = read_sequence_dir(folder, require_camera=False)   # validated: header, timestamps, images exist
+        out = [(rel, folder / rel) for rel in seq.images.relpaths]
     else:
         out = [(str(p.relative_to(folder)), p) for p in sorted(folder.rglob("*"))
                if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()]
