@@ -29,7 +29,7 @@ import numpy as np
 
 from odometry.camera import CameraModel
 from odometry.pose_cov import between_with_covariance, compose_with_covariance
-from odometry.poses import between, compose, inverse
+from odometry.poses import compose
 from odometry.rigid import RigidFit, ransac_rigid_2d
 from odometry.tilt_refine import refine_planar_tilt
 from odometry.tracking import (BadImage, coarse_shift, contrast, detect_corners, highpass, normalize, normalize_local,

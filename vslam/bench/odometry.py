@@ -376,8 +376,8 @@ def run(args: argparse.Namespace) -> int:
     print("targets: " + ", ".join(f"{k} {'met' if v else 'NOT met'}" for k, v in checks.items()))
     if args.out:
         write_json(args.out, {"benchmark": "odometry", "quick": bool(args.quick), "frames": frames,
-                              "preset": args.preset, "overrides": overrides, "opencv_threads": max(1, args.threads), "seed": args.seed,
-                              "sequences": results, "front_ends": front, "summary_natural_median": summary, "decode_ms": decode_ms,
-                              "targets": checks})
+                              "preset": args.preset, "overrides": overrides, "opencv_threads": max(1, args.threads),
+                              "seed": args.seed, "sequences": results, "front_ends": front,
+                              "summary_natural_median": summary, "decode_ms": decode_ms, "targets": checks})
         print(f"wrote {args.out}")
     return 0
