@@ -174,7 +174,9 @@ def test_bad_timestamps_and_config():
         VOConfig(lk_window=16)
     with pytest.raises(ValueError, match="unknown VOConfig field"):
         VOConfig.from_dict({"nope": 1})
-    assert VOConfig.preset("fast").max_features < VOConfig.preset("accurate").max_features
+    assert VOConfig.preset("fast").max_features < VOConfig.preset("default").max_features
+    with pytest.raises(ValueError, match="unknown VO preset"):
+        VOConfig.preset("accurate")
     with pytest.raises(ValueError, match="downward camera"):
         from odometry.camera import CameraModel
         VisualOdometry(CameraModel(640, 480, 500, 500, 319.5, 239.5))

@@ -38,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated floor types (targets are judged on carpet, concrete, asphalt, tiles)")
     p.add_argument("--frames", type=int, default=1000, help="frames per sequence (default 1000)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--preset", default="default", help="VOConfig preset: default, fast, accurate")
+    p.add_argument("--preset", default="default", help="VOConfig preset: default, fast")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a VOConfig field for an ablation, e.g. --set refine_tilt=false (repeatable)")
     p.add_argument("--threads", type=int, default=1,

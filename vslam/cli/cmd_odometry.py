@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("sequence", help="sequence directory (or any format vslam.io.open_sequence reads)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--camera", default=None, help="camera.yaml for formats without one")
-    p.add_argument("--preset", default="default", help="VO preset: default, fast, accurate")
+    p.add_argument("--preset", default="default", help="VO preset: default, fast")
     p.add_argument("--fusion-preset", default="default", help="wheel/gyro noise preset: default, precise, slippery")
     p.add_argument("--no-fallback", action="store_true",
                    help="ignore wheel odometry and gyro (pure vision; failed frames get a constant-velocity guess)")
