@@ -14,8 +14,11 @@ def best_rice_k(gaps: np.ndarray, k_max: int = 20) -> int:
     """The Rice parameter minimising the coded size."""
     if len(gaps) == 0:
         return 0
-    costs = [rice_cost(gaps, k) for k in range(k_max + 1)]
-    return int(np.argmin(costs))
+    # the optimum is near log2(mean gap): search a small window around it
+    centre = int(np.log2(max(float(np.mean(gaps)), 1.0)))
+    ks = range(max(0, centre - 2), min(k_max, centre + 2) + 1)
+    costs = [rice_cost(gaps, k) for k in ks]
+    return ks[int(np.argmin(costs))]
 
 
 def rice_encode(gaps: np.ndarray, k: int) -> tuple[bytes, bytes]:

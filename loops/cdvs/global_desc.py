@@ -15,12 +15,15 @@ import numpy as np
 from loops.cdvs.trained import GLOBAL_BITS, TrainedParams
 
 
-def assign(desc: np.ndarray, codebook: np.ndarray) -> np.ndarray:
-    """Nearest codeword (Hamming) of each descriptor."""
+def assign(desc: np.ndarray, codebook: np.ndarray, knn: int = 1) -> np.ndarray:
+    """The `knn` nearest codewords (Hamming) of each descriptor, (N, knn)."""
     if len(desc) == 0:
-        return np.zeros(0, dtype=np.int64)
-    _, idx = cv2.batchDistance(desc, codebook, cv2.CV_32S, normType=cv2.NORM_HAMMING, K=1)
-    return idx.ravel().astype(np.int64)
+        return np.zeros((0, knn), dtype=np.int64)
+    _, idx = cv2.batchDistance(desc, codebook, cv2.CV_32S, normType=cv2.NORM_HAMMING, K=knn)
+    return idx.reshape(-1, knn).astype(np.int64)
+
+
+MULTI_ASSIGN = 3  # each descriptor votes for its 3 nearest codewords: steadier residual signs with few descriptors
 
 
 def aggregate(desc: np.ndarray, trained: TrainedParams, max_clusters: int) -> tuple[np.ndarray, np.ndarray]:
@@ -30,13 +33,16 @@ def aggregate(desc: np.ndarray, trained: TrainedParams, max_clusters: int) -> tu
     bits = np.zeros(k, dtype=np.uint32)
     if len(desc) == 0:
         return visited, bits
-    a = assign(desc, trained.codebook)
-    x = np.unpackbits(desc, axis=1).astype(np.float32)
-    resid = x - trained.cluster_mean[a]
-    onehot = np.zeros((k, len(a)), dtype=np.float32)
-    onehot[a, np.arange(len(a))] = 1.0
-    v = onehot @ resid                              # (K, 256) summed residuals
+    a = assign(desc, trained.codebook, MULTI_ASSIGN).ravel()
+    rows = np.repeat(np.arange(len(desc)), MULTI_ASSIGN)
+    order = np.argsort(a, kind="stable")
     counts = np.bincount(a, minlength=k)
+    present = np.flatnonzero(counts)
+    starts = np.concatenate([[0], np.cumsum(counts[present])[:-1]])
+    x = np.unpackbits(desc, axis=1).astype(np.float32)
+    sums = np.add.reduceat(x[rows[order]], starts, axis=0)          # (n_present, 256) bit sums per cluster
+    v = np.zeros((k, x.shape[1]), dtype=np.float32)
+    v[present] = sums - counts[present, None] * trained.cluster_mean[present]   # summed residuals
     keep = np.flatnonzero(counts > 0)
     if len(keep) > max_clusters:                     # most populated first, ties by index (deterministic)
         keep = keep[np.argsort(-counts[keep], kind="stable")[:max_clusters]]

@@ -24,11 +24,11 @@ class ExtractionParams:
     """How an image becomes keypoints and descriptors (shared by all modes; only budgets differ per mode)."""
 
     max_side: int = 640            # images are resized so that max(w, h) <= max_side (as the CDVS reference)
-    n_detect: int = 700            # ORB/FAST keypoints detected on the pyramid before selection
+    n_detect: int = 1000           # ORB/FAST keypoints detected on the pyramid before selection
     n_levels: int = 5              # pyramid levels
     scale_factor: float = 1.3      # pyramid scale step
     fast_threshold: int = 12       # FAST intensity threshold (low: floors are low-contrast)
-    n_described: int = 320         # keypoints (by relevance) that get an ORB descriptor; feed the global descriptor
+    n_described: int = 500        # keypoints (by relevance) that get an ORB descriptor; feed the global descriptor
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,6 @@ MODE_PRESETS: dict[int, ModeParams] = {
     2: ModeParams(2, BUDGETS[2], desc_bits=96, max_local=80, global_clusters=40, coord_block=3),
     3: ModeParams(3, BUDGETS[3], desc_bits=128, max_local=120, global_clusters=64, coord_block=3),
     4: ModeParams(4, BUDGETS[4], desc_bits=160, max_local=180, global_clusters=128, coord_block=2),
-    5: ModeParams(5, BUDGETS[5], desc_bits=224, max_local=260, global_clusters=128, coord_block=2),
-    6: ModeParams(6, BUDGETS[6], desc_bits=256, max_local=320, global_clusters=128, coord_block=2),
+    5: ModeParams(5, BUDGETS[5], desc_bits=192, max_local=320, global_clusters=128, coord_block=2),
+    6: ModeParams(6, BUDGETS[6], desc_bits=256, max_local=400, global_clusters=128, coord_block=2),
 }

@@ -29,7 +29,7 @@ from loops.cdvs.extract import _orb, keypoint_attributes, processed_size, to_gra
 from loops.cdvs.params import MODES, CdvsParams, ExtractionParams
 from loops.cdvs.trained import DEFAULT_TRAINED, N_BITS, compute_params_id, save_trained
 
-N_CLUSTERS = 128
+N_CLUSTERS = 64
 RESP_EDGES = np.array([-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0])
 RADIUS_EDGES = np.linspace(0.1, 0.9, 9)
 LOCAL_MARGIN = 1.3
