@@ -45,6 +45,12 @@ class CameraModel:
 
     def __post_init__(self) -> None:
         for name in ("fx", "fy", "cx", "cy"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+        if self.camera_height is not None:
+            object.__setattr__(self, "camera_height", float(self.camera_height))
+        for name in ("fx", "fy", "cx", "cy"):
             v = getattr(self, name)
             if not math.isfinite(v):
                 raise ValueError(f"camera {name} must be finite, got {v}")

@@ -50,6 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except BrokenPipeError:  # output piped into `head` and closed: not an error
+        return 0
     except KeyboardInterrupt:
         print("vslam: interrupted", file=sys.stderr)
         return 130

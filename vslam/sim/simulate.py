@@ -1,0 +1,177 @@
+"""`simulate(config, out_dir)`: a complete downward-camera sequence over a procedural floor.
+
+Writes the sequence directory format (camera.yaml, frames.csv, odometry.csv, imu.csv, groundtruth.txt) plus
+sim.yaml with the configuration that produced it. Deterministic for a given seed.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import yaml
+
+from odometry.camera import CameraModel
+from odometry.poses import se2_to_tum
+from vslam.io.sequence_dir import SequenceWriter
+from vslam.sequence import GyroStream, Trajectory, WheelOdometry
+from vslam.sim.floor import Floor, FloorType
+from vslam.sim.randomness import keyed_rng
+from vslam.sim.render import Effects, FrameRenderer, image_motion
+from vslam.sim.sensors import SensorNoise, gyro_measurements, wheel_measurements
+from vslam.sim.trajectory import TrajectoryKind, curvature_profile, drive
+
+_P_TRAJ, _P_SENS, _P_FRAME, _P_WOBBLE = 101, 102, 103, 104
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Everything that defines a simulated sequence. Defaults: ~400 frames, 640x480, carpet, a 10 m closed loop."""
+
+    floor: FloorType = FloorType.CARPET
+    trajectory: TrajectoryKind = TrajectoryKind.LOOP
+    length: float = 10.0             # metres of path
+    speed: float = 0.5               # m/s nominal
+    fps: float = 20.0
+    width: int = 640
+    height: int = 480
+    focal: float = 500.0             # pixels (fx = fy)
+    camera_height: float = 0.5       # metres
+    distortion: tuple[float, float, float, float, float] = (-0.04, 0.01, 0.0, 0.0, 0.0)
+    turn_radius: float = 1.0
+    laps: int = 1
+    sensor_rate: float = 100.0       # Hz, wheel odometry and gyro
+    seed: int = 0
+    gray: bool = True
+    image_format: str = "jpg"
+    jpeg_quality: int = 95
+    effects: Effects = field(default_factory=Effects)
+    sensor_noise: SensorNoise = field(default_factory=SensorNoise)
+    max_frames: int | None = None
+
+    def camera(self) -> CameraModel:
+        return CameraModel(width=self.width, height=self.height, fx=self.focal, fy=self.focal,
+                           cx=(self.width - 1) / 2, cy=(self.height - 1) / 2, distortion=tuple(self.distortion),
+                           camera_height=self.camera_height)
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["floor"] = FloorType(self.floor).value
+        d["trajectory"] = TrajectoryKind(self.trajectory).value
+        d["distortion"] = list(self.distortion)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SimConfig":
+        d = dict(d)
+        if "effects" in d:
+            d["effects"] = Effects(**d["effects"])
+        if "sensor_noise" in d:
+            d["sensor_noise"] = SensorNoise(**d["sensor_noise"])
+        if "distortion" in d:
+            d["distortion"] = tuple(d["distortion"])
+        if "floor" in d:
+            d["floor"] = FloorType(d["floor"])
+        if "trajectory" in d:
+            d["trajectory"] = TrajectoryKind(d["trajectory"])
+        return cls(**d)
+
+
+@dataclass(frozen=True)
+class SimResult:
+    path: Path
+    frames: int
+    dropped: int
+    corrupt: int
+    seconds: float
+    path_length: float
+
+    @property
+    def fps(self) -> float:
+        return self.frames / self.seconds if self.seconds > 0 else float("inf")
+
+
+def length_for_frames(frames: int, fps: float, speed: float, accel: float = 0.5, pauses: float = 1.0) -> float:
+    """Path length whose run lasts about `frames` frames (cruise at `speed`, ramps at `accel`, rests at both ends)."""
+    cruise = frames / fps - pauses - speed / accel
+    return max(0.2, cruise * speed + speed * speed / accel * 0.5)
+
+
+def plan_motion(cfg: SimConfig):
+    """The controls (and exact poses) of the run."""
+    ds = 0.002
+    rng = keyed_rng(cfg.seed, _P_TRAJ)
+    kappa = curvature_profile(cfg.trajectory, cfg.length, ds, rng, turn_radius=cfg.turn_radius)
+    if cfg.laps > 1:
+        kappa = np.tile(kappa, cfg.laps)
+    return drive(kappa, ds, cfg.speed, cfg.sensor_rate, rng=rng)
+
+
+def simulate(cfg: SimConfig, out_dir: str | Path, overwrite: bool = False,
+             progress: Callable[[int, int], None] | None = None) -> SimResult:
+    t_start = time.perf_counter()
+    camera = cfg.camera()
+    controls = plan_motion(cfg)
+    sens_rng = keyed_rng(cfg.seed, _P_SENS)
+    wt, wv, ww = wheel_measurements(controls.t, controls.v, controls.omega, cfg.sensor_noise, sens_rng)
+    gt_, gz = gyro_measurements(controls.t, controls.omega, cfg.sensor_noise, sens_rng)
+
+    duration = float(controls.t[-1])
+    n_frames = int(math.floor(duration * cfg.fps)) + 1
+    if cfg.max_frames is not None:
+        n_frames = min(n_frames, cfg.max_frames)
+    frame_t = np.arange(n_frames) / cfg.fps
+    poses = controls.pose_at(frame_t)
+    floor = Floor(cfg.floor, seed=cfg.seed, resolution=camera.ground_resolution(), gray=cfg.gray)
+    renderer = FrameRenderer(floor, camera, cfg.effects, seed=cfg.seed)
+    fx = cfg.effects
+    wob = keyed_rng(cfg.seed, _P_WOBBLE)
+    ph = wob.uniform(0, 2 * math.pi, 4)
+    ext = "." + cfg.image_format.lower().lstrip(".")
+    kept_t, kept_pose = [], []
+    dropped = corrupt = 0
+    with SequenceWriter(out_dir, camera, image_ext=ext, overwrite=overwrite, jpeg_quality=cfg.jpeg_quality) as w:
+        for i, (t, pose) in enumerate(zip(frame_t, poses)):
+            frng = keyed_rng(cfg.seed, _P_FRAME, i)
+            if fx.dropped_frames > 0 and 0 < i < n_frames - 1 and frng.random() < fx.dropped_frames:
+                dropped += 1
+                continue
+            blur = None
+            if fx.motion_blur:
+                a, b = controls.pose_at(np.array([t - fx.exposure / 2, t + fx.exposure / 2]))
+                blur = image_motion(camera, a, b)
+            height, tilt = camera.camera_height, (0.0, 0.0)
+            if fx.wobble:
+                height = height + fx.height_wobble * math.sin(2 * math.pi * 0.37 * t + ph[0])
+                tilt = (fx.tilt_wobble * math.sin(2 * math.pi * 0.53 * t + ph[1]),
+                        fx.tilt_wobble * math.sin(2 * math.pi * 0.29 * t + ph[2]))
+            img = renderer.render(pose, float(t), blur_px=blur, height=height, tilt=tilt, rng=frng)
+            if fx.corrupt_frames > 0 and 0 < i < n_frames - 1 and frng.random() < fx.corrupt_frames:
+                # a truncated file with garbage: what a failing SD card or transfer leaves behind
+                junk = frng.integers(0, 256, 2048, dtype=np.uint8).tobytes()
+                w.add_frame(float(t), raw_bytes=junk)
+                corrupt += 1
+            else:
+                w.add_frame(float(t), img)
+            kept_t.append(float(t))
+            kept_pose.append(pose)
+            if progress is not None:
+                progress(i + 1, n_frames)
+        kept_pose_arr = np.asarray(kept_pose)
+        # sensor streams end with the last frame
+        last = frame_t[-1] + 1e-9
+        wk, gk = wt <= last, gt_ <= last
+        wt, wv, ww, gt_, gz = wt[wk], wv[wk], ww[wk], gt_[gk], gz[gk]
+        gt = Trajectory(np.asarray(kept_t), se2_to_tum(kept_pose_arr))
+        sim_yaml = "# configuration that produced this sequence (vslam simulate)\n" + yaml.safe_dump(cfg.to_dict(),
+                                                                                                    sort_keys=False)
+        path = w.close(odometry=WheelOdometry(wt, wv, ww), imu=GyroStream(gt_, gz), groundtruth=gt,
+                       extra_files={"sim.yaml": sim_yaml})
+    travelled = controls.pose_at(np.linspace(0.0, frame_t[-1], max(2, int(frame_t[-1] * cfg.sensor_rate) + 1)))
+    length = float(np.sum(np.hypot(*np.diff(travelled[:, :2], axis=0).T)))
+    return SimResult(path=path, frames=len(kept_t), dropped=dropped, corrupt=corrupt,
+                     seconds=time.perf_counter() - t_start, path_length=length)
