@@ -25,7 +25,7 @@ import numpy as np
 
 from loops.cdvs.bitcode import best_rice_k, rice_cost, rice_decode, rice_encode
 from loops.cdvs.extract import Features, extract_features
-from loops.cdvs.global_desc import aggregate
+from loops.cdvs.global_desc import cluster_signatures, select_clusters
 from loops.cdvs.params import BUDGETS, MODES, CdvsParams
 from loops.cdvs.trained import GLOBAL_BITS, N_BITS, TrainedParams, load_trained
 
@@ -86,15 +86,19 @@ def _coord_bytes(idx_sorted: np.ndarray) -> tuple[int, int]:
     return -(-unary_bits // 8) + -(-(n * k) // 8), k
 
 
-def encode_features(feats: Features, params: CdvsParams, trained: TrainedParams) -> bytes:
-    """Serialise already extracted features under the mode's byte budget (never exceeded)."""
+def encode_features(feats: Features, params: CdvsParams, trained: TrainedParams,
+                    signatures: tuple[np.ndarray, np.ndarray] | None = None) -> bytes:
+    """Serialise already extracted features under the mode's byte budget (never exceeded). `signatures`
+    (from global_desc.cluster_signatures) may be passed to share the global aggregation across modes."""
     mp = params.mode
     if mp.desc_bits % 8 or not 8 <= mp.desc_bits <= N_BITS:
         raise ValueError(f"desc_bits must be a multiple of 8 in 8..{N_BITS}, got {mp.desc_bits}")
     k_clusters = trained.n_clusters
     base = HEADER_SIZE + CRC_SIZE + -(-k_clusters // 8)
     max_clusters = max(0, min(mp.global_clusters, (mp.budget - base) // (GLOBAL_BITS // 8)))
-    visited, gbits = aggregate(feats.desc, trained, max_clusters)
+    if signatures is None:
+        signatures = cluster_signatures(feats.desc, trained)
+    visited, gbits = select_clusters(*signatures, max_clusters)
     n_vis = int(visited.sum())
     fixed = base + n_vis * GLOBAL_BITS // 8
     dbytes = mp.desc_bits // 8
@@ -149,6 +153,16 @@ def extract(image: np.ndarray, mode: int, params: CdvsParams | None = None,
             trained: TrainedParams | None = None) -> Descriptor:
     """encode + decode: the descriptor exactly as a receiver of the bytes sees it."""
     return decode(encode(image, mode, params, trained))
+
+
+def encode_all_modes(image: np.ndarray, modes=MODES, params: dict[int, CdvsParams] | None = None,
+                     trained: TrainedParams | None = None) -> dict[int, bytes]:
+    """One extraction, every requested mode encoded (the extraction does not depend on the mode)."""
+    trained = trained or load_trained()
+    params = params or {m: CdvsParams.for_mode(m) for m in modes}
+    feats = extract_features(image, params[modes[0]].extraction, trained)
+    sig = cluster_signatures(feats.desc, trained)
+    return {m: encode_features(feats, params[m], trained, sig) for m in modes}
 
 
 def decode(data: bytes) -> Descriptor:

@@ -26,13 +26,12 @@ def assign(desc: np.ndarray, codebook: np.ndarray, knn: int = 1) -> np.ndarray:
 MULTI_ASSIGN = 3  # each descriptor votes for its 3 nearest codewords: steadier residual signs with few descriptors
 
 
-def aggregate(desc: np.ndarray, trained: TrainedParams, max_clusters: int) -> tuple[np.ndarray, np.ndarray]:
-    """ORB descriptors (N, 32) -> (visited (K,) bool, bits (K,) uint32, zero where not visited)."""
+def cluster_signatures(desc: np.ndarray, trained: TrainedParams) -> tuple[np.ndarray, np.ndarray]:
+    """ORB descriptors (N, 32) -> (assignment counts (K,), sign bits (K,) uint32 of every visited cluster)."""
     k = trained.n_clusters
-    visited = np.zeros(k, dtype=bool)
     bits = np.zeros(k, dtype=np.uint32)
     if len(desc) == 0:
-        return visited, bits
+        return np.zeros(k, dtype=np.int64), bits
     a = assign(desc, trained.codebook, MULTI_ASSIGN).ravel()
     rows = np.repeat(np.arange(len(desc)), MULTI_ASSIGN)
     order = np.argsort(a, kind="stable")
@@ -41,16 +40,26 @@ def aggregate(desc: np.ndarray, trained: TrainedParams, max_clusters: int) -> tu
     starts = np.concatenate([[0], np.cumsum(counts[present])[:-1]])
     x = np.unpackbits(desc, axis=1).astype(np.float32)
     sums = np.add.reduceat(x[rows[order]], starts, axis=0)          # (n_present, 256) bit sums per cluster
-    v = np.zeros((k, x.shape[1]), dtype=np.float32)
-    v[present] = sums - counts[present, None] * trained.cluster_mean[present]   # summed residuals
-    keep = np.flatnonzero(counts > 0)
-    if len(keep) > max_clusters:                     # most populated first, ties by index (deterministic)
-        keep = keep[np.argsort(-counts[keep], kind="stable")[:max_clusters]]
-    y = v[keep] @ trained.projection                 # (n, 32)
-    visited[keep] = True
+    resid = sums - counts[present, None] * trained.cluster_mean[present]   # summed residuals
+    y = resid @ trained.projection                                   # (n_present, 32)
     weights = (np.uint32(1) << np.arange(GLOBAL_BITS, dtype=np.uint32))
-    bits[keep] = ((y > 0).astype(np.uint32) * weights).sum(axis=1, dtype=np.uint64).astype(np.uint32)
-    return visited, bits
+    bits[present] = ((y > 0).astype(np.uint32) * weights).sum(axis=1, dtype=np.uint64).astype(np.uint32)
+    return counts, bits
+
+
+def select_clusters(counts: np.ndarray, bits: np.ndarray, max_clusters: int) -> tuple[np.ndarray, np.ndarray]:
+    """Keep at most `max_clusters` visited clusters, most populated first (ties by index: deterministic)."""
+    keep = np.flatnonzero(counts > 0)
+    if len(keep) > max_clusters:
+        keep = keep[np.argsort(-counts[keep], kind="stable")[:max_clusters]]
+    visited = np.zeros(len(counts), dtype=bool)
+    visited[keep] = True
+    return visited, np.where(visited, bits, np.uint32(0)).astype(np.uint32)
+
+
+def aggregate(desc: np.ndarray, trained: TrainedParams, max_clusters: int) -> tuple[np.ndarray, np.ndarray]:
+    """ORB descriptors (N, 32) -> (visited (K,) bool, bits (K,) uint32, zero where not visited)."""
+    return select_clusters(*cluster_signatures(desc, trained), max_clusters)
 
 
 def global_score(vis_a: np.ndarray, bits_a: np.ndarray, vis_b: np.ndarray, bits_b: np.ndarray,
