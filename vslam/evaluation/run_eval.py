@@ -1,0 +1,122 @@
+"""Evaluate a run directory written by `vslam run` (or any folder with TUM trajectories) against ground truth."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from odometry.atomic_io import atomic_write_text
+from odometry.poses import read_tum, tum_to_se2, tum_to_se3_matrices
+from vslam.evaluation.loops import loop_precision_recall, read_loops_csv
+from vslam.evaluation.metrics import Alignment, DeltaUnit, align, associate, evaluate, start_to_end_error
+from vslam.evaluation import plots
+
+TRAJECTORIES = {"VO": "trajectory_vo.txt", "SLAM": "trajectory_slam.txt"}
+
+
+def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignment: Alignment | str = Alignment.SE3,
+                 delta: float = 1.0, delta_unit: DeltaUnit | str = DeltaUnit.FRAMES, max_diff: float = 0.01,
+                 overlap_threshold: float = 0.33, make_plots: bool = True) -> dict:
+    """Metrics of every trajectory in `out_dir` (+ loops when loops.csv and a downward camera are known).
+    Writes eval.json and plots/; returns the report dict."""
+    out = Path(out_dir)
+    if not out.is_dir():
+        raise FileNotFoundError(f"{out}: run directory not found")
+    run_info = json.loads((out / "run.json").read_text()) if (out / "run.json").is_file() else {}
+    seq = None
+    if gt_file is None:
+        src = run_info.get("sequence")
+        if src is None:
+            raise ValueError(f"{out}: no ground truth given (--gt FILE) and no run.json naming the sequence")
+        from vslam.io import open_sequence
+
+        seq = open_sequence(src, check_images="none")
+        if seq.groundtruth is None:
+            raise ValueError(f"{src}: the sequence has no ground truth; give one with --gt FILE")
+        t_gt, gt = seq.groundtruth.timestamps, seq.groundtruth.poses
+    else:
+        t_gt, gt = read_tum(gt_file)
+    gt_m = tum_to_se3_matrices(gt)
+    report: dict = {"alignment": Alignment(alignment).value, "rpe_delta": delta, "rpe_delta_unit": DeltaUnit(delta_unit).value,
+                    "trajectories": {}}
+    series, planar = {}, {}
+    for name, fname in TRAJECTORIES.items():
+        f = out / fname
+        if not f.is_file():
+            continue
+        t_est, est = read_tum(f)
+        rep = evaluate(t_gt, gt_m, t_est, tum_to_se3_matrices(est), alignment, max_diff, delta, delta_unit)
+        d = rep.to_dict()
+        ig, ie = associate(t_gt, t_est, max_diff)
+        d["start_to_end"] = start_to_end_error(tum_to_se2(est[ie]), tum_to_se2(gt[ig]))
+        report["trajectories"][name] = d
+        series[name] = (rep.timestamps - t_gt[0], rep.ape_errors)
+        aligned, _ = align(gt_m[ig], tum_to_se3_matrices(est[ie]), alignment)
+        planar[name] = np.column_stack([aligned[:, 0, 3], aligned[:, 1, 3]])
+    if not report["trajectories"]:
+        raise FileNotFoundError(f"{out}: no trajectory_vo.txt or trajectory_slam.txt to evaluate")
+    loops = None
+    if (out / "loops.csv").is_file():
+        loops = read_loops_csv(out / "loops.csv")
+        camera = seq.camera if seq is not None else None
+        if camera is None and "camera" in run_info:
+            from odometry.camera import CameraModel
+
+            camera = CameraModel.from_dict(run_info["camera"])
+        frame_t = np.asarray(run_info.get("frame_timestamps", [])) if run_info.get("frame_timestamps") else (
+            seq.timestamps if seq is not None else None)
+        if camera is not None and camera.camera_height is not None and frame_t is not None and len(frame_t):
+            from vslam.sequence import Trajectory
+
+            gt_frames = Trajectory(t_gt, gt).planar_at(frame_t, max_gap=0.5)
+            queried = run_info.get("keyframes")
+            kw = dict(queried=np.asarray(queried) if queried else None, r=overlap_threshold,
+                      min_separation=int(run_info.get("loop_min_separation", 1)))
+            report["loops"] = {"accepted": loop_precision_recall(camera, gt_frames, loops, **kw),
+                               "kept_by_back_end": loop_precision_recall(camera, gt_frames, loops, use_inliers=True, **kw)}
+    if make_plots:
+        pdir = out / "plots"
+        pdir.mkdir(exist_ok=True)
+        gt_xy = gt[:, :2]
+        segs = None
+        if loops is not None and "SLAM" in planar:
+            segs = _loop_segments(out, loops)
+        plots.plot_trajectories(pdir / "trajectories.png", {"ground truth": gt_xy, **planar}, loop_positions=segs,
+                                title=f"aligned ({Alignment(alignment).value})")
+        plots.plot_errors(pdir / "error_over_time.png", series)
+        if loops is not None and len(loops):
+            n = int(max(loops.query.max(), loops.match.max())) + 1
+            plots.plot_score_matrix(pdir / "loop_scores.png", loops.query, loops.match, loops.local_score, n)
+    atomic_write_text(out / "eval.json", json.dumps(report, indent=2, default=float) + "\n")
+    return report
+
+
+def _loop_segments(out: Path, loops) -> dict:
+    """Loop edges drawn on the (unaligned) SLAM trajectory, by frame index."""
+    t, est = read_tum(out / "trajectory_slam.txt")
+    p = est[:, :2]
+    segs = {"accepted": [], "outlier": [], "rejected": []}
+    for q, m, acc, inl in zip(loops.query, loops.match, loops.accepted,
+                              loops.inlier if loops.inlier is not None else [True] * len(loops)):
+        if q >= len(p) or m >= len(p):
+            continue
+        kind = "rejected" if not acc else ("accepted" if inl else "outlier")
+        segs[kind].append((p[q], p[m]))
+    return segs
+
+
+def format_report(rep: dict) -> str:
+    lines = [f"alignment {rep['alignment']}, RPE delta {rep['rpe_delta']:g} {rep['rpe_delta_unit']}",
+             "| trajectory | matched | path (m) | ATE RMSE (m) | ATE % of path | RPE RMSE (m) | RPE rot (deg) | "
+             "start-to-end error (m) |", "|---|---|---|---|---|---|---|---|"]
+    for name, d in rep["trajectories"].items():
+        se = d["start_to_end"]
+        lines.append(f"| {name} | {d['matched']} | {d['path_length_m']:.2f} | {d['ape_m']['rmse']:.4f} | "
+                     f"{d['ape_rmse_percent_of_path']:.3f} | {d['rpe_m']['rmse']:.5f} | {d['rpe_rot_deg']['rmse']:.4f} | "
+                     f"{se.get('error_distance', float('nan')):.4f} |")
+    if "loops" in rep:
+        for k, v in rep["loops"].items():
+            rec = v.get("recall", float("nan"))
+            lines.append(f"loops ({k}): {v['reported']} reported, precision {v['precision']:.3f}, recall {rec:.3f}")
+    return "\n".join(lines)
