@@ -73,13 +73,15 @@ def keypoint_attributes(kps, proc_size: tuple[int, int]) -> tuple[np.ndarray, np
     return xy, lresp, octave, radius
 
 
-def relevance(lresp: np.ndarray, octave: np.ndarray, radius: np.ndarray, trained: TrainedParams | None) -> np.ndarray:
+def relevance(lresp: np.ndarray, octave: np.ndarray, radius: np.ndarray, trained: TrainedParams | None,
+              centre_prior: bool = True) -> np.ndarray:
     """The CDVS-style relevance: product of per-attribute probabilities that a keypoint is matched."""
     if trained is None:  # used only while training the tables themselves
         return lresp.astype(np.float32)
     r = trained.resp_p[np.searchsorted(trained.resp_edges, lresp)]
     o = trained.octave_p[np.clip(octave, 0, len(trained.octave_p) - 1)]
-    q = trained.radius_p[np.searchsorted(trained.radius_edges, radius)]
+    table = trained.radius_p_central if centre_prior else trained.radius_p
+    q = table[np.searchsorted(trained.radius_edges, radius)]
     return (r * o * q).astype(np.float32)
 
 
@@ -99,7 +101,7 @@ def extract_features(image: np.ndarray, params: ExtractionParams, trained: Train
     if not kps:
         return empty
     _, lresp, octave, radius = keypoint_attributes(kps, (pw, ph))
-    rel = relevance(lresp, octave, radius, trained)
+    rel = relevance(lresp, octave, radius, trained, params.centre_prior)
     order = np.argsort(-rel, kind="stable")[:n_desc]
     chosen = [kps[i] for i in order]
     chosen, desc = orb.compute(gray, chosen)
@@ -113,6 +115,6 @@ def extract_features(image: np.ndarray, params: ExtractionParams, trained: Train
     lr = np.log(np.maximum(resp, 1e-12) / max(med, 1e-12))
     centre = np.array([(pw - 1) / 2.0, (ph - 1) / 2.0])
     rad = np.linalg.norm(xy - centre, axis=1) / (0.5 * np.hypot(pw, ph))
-    rel2 = relevance(lr, octs, rad, trained)
+    rel2 = relevance(lr, octs, rad, trained, params.centre_prior)
     o2 = np.argsort(-rel2, kind="stable")
     return Features((ow, oh), (pw, ph), xy[o2], rel2[o2], np.ascontiguousarray(desc[o2]))

@@ -28,6 +28,7 @@ class ExtractionParams:
     n_levels: int = 5              # pyramid levels
     scale_factor: float = 1.3      # pyramid scale step
     fast_threshold: int = 12       # FAST intensity threshold (low: floors are low-contrast)
+    centre_prior: bool = True      # relevance prefers the image centre (photographs); off for floors
     n_described: int = 500        # keypoints (by relevance) that get an ORB descriptor; feed the global descriptor
 
 
@@ -75,7 +76,8 @@ class CdvsParams:
     @staticmethod
     def floor(mode: int) -> "CdvsParams":
         """Preset for a downward camera over a planar floor: the image motion is a rotation + translation."""
-        return CdvsParams.for_mode(mode, matching=replace(MatchParams(), geometry=GeometryModel.SIMILARITY))
+        return CdvsParams.for_mode(mode, extraction=replace(ExtractionParams(), centre_prior=False),
+                                   matching=replace(MatchParams(), geometry=GeometryModel.SIMILARITY))
 
 
 # The per-mode table. desc_bits/max_local were chosen so that the locals fill the budget left after the header and

@@ -27,7 +27,8 @@ class TrainedParams:
     resp_p: np.ndarray           # (R,) relevance factor per response bin
     octave_p: np.ndarray         # (L,) relevance factor per pyramid level
     radius_edges: np.ndarray     # (Q-1,) inner bin edges of distance-from-centre / half-diagonal
-    radius_p: np.ndarray         # (Q,)
+    radius_p: np.ndarray         # (Q,) P(matched | radius, visible in both views): no centre preference
+    radius_p_central: np.ndarray  # (Q,) P(matched | radius) including visibility: prefers the image centre
     codebook: np.ndarray         # (K, 32) uint8 binary centroids
     cluster_mean: np.ndarray     # (K, 256) float32 mean bit value per cluster (residual reference)
     projection: np.ndarray       # (256, 32) float32 residual projection (PCA)
@@ -42,7 +43,8 @@ class TrainedParams:
         return int(self.codebook.shape[0])
 
 
-ARRAY_FIELDS = ("bit_order", "resp_edges", "resp_p", "octave_p", "radius_edges", "radius_p", "codebook",
+ARRAY_FIELDS = ("bit_order", "resp_edges", "resp_p", "octave_p", "radius_edges", "radius_p", "radius_p_central",
+                "codebook",
                 "cluster_mean", "projection", "global_weights", "local_threshold", "global_threshold")
 # Fields that change what is written into a descriptor: their hash is the params id.
 _ID_FIELDS = ("bit_order", "codebook", "cluster_mean", "projection")

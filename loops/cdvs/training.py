@@ -66,7 +66,7 @@ def random_warp(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, 
     th = rng.uniform(-np.pi, np.pi)
     s = np.exp(rng.uniform(np.log(0.75), np.log(1.35)))
     R = np.array([[s * np.cos(th), -s * np.sin(th)], [s * np.sin(th), s * np.cos(th)]])
-    t = c - R @ c + rng.uniform(-0.15, 0.15, 2) * [w, h]
+    t = c - R @ c + rng.uniform(-0.3, 0.3, 2) * [w, h]
     H = np.eye(3)
     H[:2, :2], H[:2, 2] = R, t
     P = np.eye(3)
@@ -198,16 +198,24 @@ def main(argv: list[str] | None = None) -> int:
         srt = np.sort(hd, axis=1)
         ratio_ok = srt[:, 0] <= 0.85 * srt[:, 1]
         lab = has_gt & (nn == gt) & ratio_ok
-        attrs.append(np.column_stack([lra, oa, ra]))
+        # relevance = P(correct match | attributes, the point is visible in both views): without the visibility
+        # condition the tables would learn "prefer the image centre", wrong for loops whose overlap is off-centre
+        h, w = view.shape
+        visible = np.all((proj >= 16) & (proj < [w - 16, h - 16]), axis=1)
+        attrs.append(np.column_stack([lra, oa, ra, visible]))
         labels.append(lab)
         ia = np.flatnonzero(has_gt)
         xor_match.append(np.unpackbits(da[ia] ^ db[gt[ia]], axis=1))
         all_desc.append(da)
     A = np.concatenate(attrs)
     L = np.concatenate(labels)
-    resp_p = binned_rate(A[:, 0], L, RESP_EDGES, len(RESP_EDGES) + 1)
-    octave_p = binned_rate(A[:, 1].astype(int), L, None, ex.n_levels)
-    radius_p = binned_rate(A[:, 2], L, RADIUS_EDGES, len(RADIUS_EDGES) + 1)
+    vis = A[:, 3] > 0
+    resp_p = binned_rate(A[vis, 0], L[vis], RESP_EDGES, len(RESP_EDGES) + 1)
+    octave_p = binned_rate(A[vis, 1].astype(int), L[vis], None, ex.n_levels)
+    radius_p = binned_rate(A[vis, 2], L[vis], RADIUS_EDGES, len(RADIUS_EDGES) + 1)
+    # with visibility folded in, the radius table also learns "the centre is more often in the other view":
+    # right for photographs of an object, wrong for loops on a floor where the overlap can be anywhere
+    radius_p_central = binned_rate(A[:, 2], L, RADIUS_EDGES, len(RADIUS_EDGES) + 1)
     D = np.concatenate(all_desc)
     bits = np.unpackbits(D, axis=1)
     p_match = np.concatenate(xor_match).mean(axis=0)
@@ -234,7 +242,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"codebook done ({time.time() - t0:.0f} s)", file=sys.stderr)
 
     arrays = dict(bit_order=bit_order, resp_edges=RESP_EDGES.astype(np.float32), resp_p=resp_p, octave_p=octave_p,
-                  radius_edges=RADIUS_EDGES.astype(np.float32), radius_p=radius_p, codebook=codebook,
+                  radius_edges=RADIUS_EDGES.astype(np.float32), radius_p=radius_p,
+                  radius_p_central=radius_p_central, codebook=codebook,
                   cluster_mean=cluster_mean.astype(np.float16).astype(np.float32), projection=projection,
                   global_weights=np.ones(33, np.float32), local_threshold=np.zeros(6, np.float32),
                   global_threshold=np.zeros(6, np.float32))
@@ -289,9 +298,17 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def may_share_content(a: str, b: str) -> bool:
+    """Scene groups that can show the same surface: one group, a simulated floor and a texture photograph (floors
+    are rendered from those photographs), or two floors of the wood family (same wood photographs)."""
+    kinds = {a.split("/")[0], b.split("/")[0]}
+    woods = sum("wood" in g for g in (a, b)) == 2
+    return a == b or kinds == {"floor", "textures"} or (kinds == {"floor"} and woods)
+
+
 def other_group(groups: list[str], k: int, rng: np.random.Generator) -> int:
-    """A random image index from a different scene group than image k."""
-    cand = [i for i, g in enumerate(groups) if g != groups[k]]
+    """A random image index from a scene group that cannot share content with image k's."""
+    cand = [i for i, g in enumerate(groups) if not may_share_content(g, groups[k])]
     return int(cand[rng.integers(len(cand))])
 
 
