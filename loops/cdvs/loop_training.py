@@ -61,9 +61,14 @@ def select_pairs(n: int, overlap: np.ndarray, global_rank: dict[int, np.ndarray]
     return np.array(sorted(pairs), dtype=np.int64).reshape(-1, 2)
 
 
+def floor_params(modes=MODES) -> dict[int, CdvsParams]:
+    """The downward-camera preset of every mode."""
+    return {m: CdvsParams.floor(m) for m in modes}
+
+
 def score_sequence(descs: dict[int, list], camera: CameraModel, poses: np.ndarray, exclude_recent: int = 5,
                    shortlist: int = 5, n_random: int = 5, seed: int = 0,
-                   trained: TrainedParams | None = None) -> PairScores:
+                   trained: TrainedParams | None = None, params: dict[int, CdvsParams] | None = None) -> PairScores:
     """Match the selected keyframe pairs in every mode. `poses` (N, 3) are the keyframes' planar poses."""
     trained = trained or load_trained()
     modes = sorted(descs)
@@ -82,7 +87,7 @@ def score_sequence(descs: dict[int, list], camera: CameraModel, poses: np.ndarra
     pairs = select_pairs(n, J, {q: sorted(v) for q, v in ranks.items()}, exclude_recent, n_random, rng)
     out = PairScores(pairs, J[pairs[:, 0], pairs[:, 1]] if len(pairs) else np.zeros(0))
     for m in modes:
-        p = CdvsParams.for_mode(m).matching
+        p = (params[m] if params else CdvsParams.for_mode(m)).matching
         res = [match(descs[m][a], descs[m][b], p, trained) for a, b in pairs]
         out.local[m] = np.array([r.local_score for r in res])
         out.global_[m] = np.array([r.global_score for r in res])

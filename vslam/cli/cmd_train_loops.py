@@ -57,7 +57,7 @@ def run(a: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from loops.cdvs.loop_training import encode_all, fit_loop_model, score_sequence
+    from loops.cdvs.loop_training import encode_all, fit_loop_model, floor_params, score_sequence
     from loops.cdvs.plots import plot_loop_model
     from loops.cdvs.trained import load_trained
     from vslam.io import open_sequence
@@ -78,9 +78,10 @@ def run(a: argparse.Namespace) -> int:
         poses = fused_poses(seq)
         idx = np.arange(0, len(seq), a.every)
         images = (seq.image(int(i), gray=True) for i in idx)
-        descs = encode_all(images, modes, trained=trained)
+        params = floor_params(modes)
+        descs = encode_all(images, modes, params, trained=trained)
         ps = score_sequence(descs, cam, poses[idx], exclude_recent=a.exclude_recent, shortlist=a.shortlist,
-                            n_random=a.random, seed=a.seed, trained=trained)
+                            n_random=a.random, seed=a.seed, trained=trained, params=params)
         scored.append(ps)
         n_pos = int(np.sum(ps.overlap >= a.overlap))
         sources.append({"sequence": str(path), "keyframes": int(len(idx)), "pairs": int(len(ps.pairs)),
@@ -92,7 +93,8 @@ def run(a: argparse.Namespace) -> int:
                   else "vslam train-loops", "sequences": sources, "overlap_threshold": a.overlap,
                   "relative_motion": "odometry.fusion.fuse_wheel_gyro (wheel odometry + gyro)",
                   "every": a.every, "exclude_recent": a.exclude_recent, "shortlist": a.shortlist,
-                  "random": a.random, "seed": a.seed, "descriptor_params_id": trained.params_id}
+                  "random": a.random, "seed": a.seed, "descriptor_params_id": trained.params_id,
+                  "descriptor_preset": "CdvsParams.floor"}
     model = fit_loop_model(scored, a.overlap, provenance)
     out = Path(a.out)
     model.save(out)
