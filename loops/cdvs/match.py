@@ -105,13 +105,19 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     if len(w) < p.min_matches or w.sum() <= 0:   # (one-way weights are scaled to 0 when no match is two-way)
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     xa, xb = a.xy[ia].astype(np.float64), b.xy[ib].astype(np.float64)
-    keep = distrat_inliers(xa, xb, p.distrat_chi2)
+    # the geometric check runs on the best-weighted matches only (DISTRAT is quadratic in their number); the
+    # transform it yields then decides for every tentative match
+    top = np.argsort(-w, kind="stable")[: p.max_geometry_matches]
+    keep = top[distrat_inliers(xa[top], xb[top], p.distrat_chi2)]
     if len(keep) < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
-    diag = float(np.hypot(*b.proc_size))
-    ok = ransac(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, p.ransac_threshold_frac * diag)
-    keep = keep[ok]
-    if len(keep) < p.min_inliers:
+    thr = p.ransac_threshold_frac * float(np.hypot(*b.proc_size))
+    ok, predict = ransac(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, thr)
+    if predict is None or ok.sum() < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
-    return MatchResult(g, float(w[keep].sum()), len(w), len(keep), a.keypoints[ia[keep]], b.keypoints[ib[keep]],
-                       w[keep])
+    inl = ok if len(top) == len(w) else None
+    final = keep[ok] if inl is not None else np.flatnonzero(np.sum((predict(xa) - xb) ** 2, axis=1) < thr * thr)
+    if len(final) < p.min_inliers:
+        return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
+    return MatchResult(g, float(w[final].sum()), len(w), len(final), a.keypoints[ia[final]], b.keypoints[ib[final]],
+                       w[final])

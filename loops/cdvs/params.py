@@ -53,6 +53,7 @@ class MatchParams:
     ratio: float = 0.90            # Lowe ratio on Hamming distances (d1 <= ratio * d2)
     max_distance_frac: float = 0.30  # reject nearest neighbours farther than this fraction of the bits
     min_matches: int = 5           # below this, no geometric check (local score 0)
+    max_geometry_matches: int = 96  # DISTRAT + RANSAC see at most this many best-weighted matches (cost ~ K^2)
     distrat_chi2: float = 29.5435  # chi-square(24 dof) 80th percentile: below it the LDR histogram looks like outliers
     ransac_iterations: int = 24    # "a few RANSAC iterations" after DISTRAT (deterministic, seeded)
     ransac_threshold_frac: float = 0.02  # inlier threshold as a fraction of the processed image diagonal
