@@ -28,6 +28,8 @@ class DatabaseParams:
     min_global: float = -1.0       # candidates below this global score are not verified
     confirmations: int = 1         # consecutive query keyframes that must agree before a loop is accepted
     confirm_window: int = 5        # "agree": a verified match within this many stored keyframes of the last one
+    min_overlap: float | None = None  # accept only if the verified transform implies at least this image overlap;
+                                      # None: the model's min_overlap (0 without a model)
 
 
 @dataclass(frozen=True)
@@ -37,7 +39,7 @@ class Candidate:
     local_score: float
     n_inliers: int
     match: MatchResult             # inlier pixel pairs: query keypoints in inliers_a, stored in inliers_b
-    passes: bool                   # local score >= the acceptance threshold
+    passes: bool                   # local score >= the acceptance threshold (and overlap >= min_overlap)
     confirmed: bool                # passes and confirmed by the previous query keyframes
     probability: float | None      # P(loop | local score) when the database has a LoopModel
 
@@ -62,6 +64,10 @@ class LoopDatabase:
             self.threshold = float(model.threshold(mode))
         else:
             self.threshold = float(self.trained.local_threshold[mode - 1])
+        if self.db.min_overlap is not None:
+            self.min_overlap = float(self.db.min_overlap)
+        else:
+            self.min_overlap = float(getattr(model, "min_overlap", None) or 0.0)
         k = self.trained.n_clusters
         self._vis = np.zeros((0, k), dtype=bool)
         self._bits = np.zeros((0, k), dtype=np.uint32)
@@ -127,10 +133,10 @@ class LoopDatabase:
                     continue
                 r = match(descriptor, self._descs[i], self.params.matching, self.trained)
                 out.append((int(i), r))
-        passing = [i for i, r in out if r.local_score >= self.threshold]
+        passing = [i for i, r in out if self._passes(r)]
         cands = []
         for i, r in out:
-            passes = r.local_score >= self.threshold
+            passes = self._passes(r)
             confirmed = passes and self._confirmed(i)
             prob = float(self.model.probability(self.mode, r.local_score)) if self.model is not None else None
             cands.append(Candidate(int(self._ids[i]), float(r.global_score), r.local_score, r.n_inliers, r, passes,
@@ -138,6 +144,9 @@ class LoopDatabase:
         self._history.append(passing)
         cands.sort(key=lambda c: -c.local_score)
         return cands
+
+    def _passes(self, r: MatchResult) -> bool:
+        return r.local_score >= self.threshold and (self.min_overlap <= 0.0 or r.overlap >= self.min_overlap)
 
     def _confirmed(self, index: int) -> bool:
         need = self.db.confirmations - 1

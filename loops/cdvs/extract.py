@@ -67,9 +67,12 @@ def _fast(threshold: int) -> cv2.FastFeatureDetector:
 
 
 def detector_for(gray: np.ndarray, params: ExtractionParams) -> cv2.ORB:
-    """ORB with the low FAST threshold, or the high one on corner-dense textures (a quick FAST count on the
-    full-resolution image decides): same keypoints where it matters, several times faster on carpet."""
-    n = len(_fast(params.fast_threshold).detect(gray))
+    """ORB with the low FAST threshold, or the high one on corner-dense textures: same keypoints where it matters,
+    several times faster on carpet. A FAST count on the central quarter of the image decides (counting on the
+    whole image cost as much as ORB itself on carpet)."""
+    h, w = gray.shape
+    crop = gray[h // 4: h // 4 + h // 2, w // 4: w // 4 + w // 2]
+    n = 4 * len(_fast(params.fast_threshold).detect(crop))
     return _orb(params, params.dense_threshold if n > params.dense_corners else None)
 
 

@@ -9,6 +9,7 @@ the histogram excess (observed - scaled outlier model) over the pairs picks them
 """
 from __future__ import annotations
 
+import functools
 from typing import Callable
 
 import numpy as np
@@ -26,18 +27,28 @@ def _ldr_bins(v: np.ndarray) -> np.ndarray:
     return np.clip(np.floor((v + 1e-5 - edge0) / _LOG_STEP), 0, _N_LDR - 1).astype(np.int64)
 
 
+@functools.lru_cache(maxsize=512)
+def _pairs(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs i < j of k matches (cached: the geometric check runs on the same few sizes again and again)."""
+    i, j = np.triu_indices(k, 1)
+    i.setflags(write=False)
+    j.setflags(write=False)
+    return i, j
+
+
 def distrat_inliers(xa: np.ndarray, xb: np.ndarray, chi2_threshold: float) -> np.ndarray:
     """Indices of the matches (rows of xa, xb: (K, 2)) that DISTRAT finds geometrically consistent."""
     k = len(xa)
     if k < 3:
         return np.zeros(0, dtype=np.int64)
-    i, j = np.triu_indices(k, 1)
-    da = np.sum((xa[i] - xa[j]) ** 2, axis=1, dtype=np.float64)
-    db = np.sum((xb[i] - xb[j]) ** 2, axis=1, dtype=np.float64)
-    ldr = 0.5 * np.log((da + 1e-6) / (db + 1e-9))
+    i, j = _pairs(k)
+    da = (xa[i, 0] - xa[j, 0]) ** 2 + (xa[i, 1] - xa[j, 1]) ** 2
+    db = (xb[i, 0] - xb[j, 0]) ** 2 + (xb[i, 1] - xb[j, 1]) ** 2
+    loga, logb = 0.5 * np.log(da + 1e-6), 0.5 * np.log(db + 1e-9)
+    ldr = loga - logb
     # outlier model: distribution of (log dA - log dB) for independent pairs = correlation of the two histograms
-    la = np.clip(np.rint(0.5 * np.log(da + 1e-9) / _LOG_STEP), 0, _N_LOGD - 1).astype(np.int64)
-    lb = np.clip(np.rint(0.5 * np.log(db + 1e-9) / _LOG_STEP), 0, _N_LOGD - 1).astype(np.int64)
+    la = np.clip(np.rint(loga * (1.0 / _LOG_STEP)), 0, _N_LOGD - 1).astype(np.intp)
+    lb = np.clip(np.rint(logb * (1.0 / _LOG_STEP)), 0, _N_LOGD - 1).astype(np.intp)
     ha = np.bincount(la, minlength=_N_LOGD).astype(np.float64)
     hb = np.bincount(lb, minlength=_N_LOGD).astype(np.float64)
     conv = np.convolve(ha, hb[::-1])                  # index m <-> difference (m - 34) * step
@@ -111,10 +122,27 @@ def _apply_affine(M: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
     return predict
 
 
+def _affine_ok(L: np.ndarray, scale_range: tuple[float, float], max_anisotropy: float) -> np.ndarray:
+    """Which linear parts L (..., 2, 2) of fitted transforms are a plausible view change: no mirroring, overall
+    scale sqrt|det| within scale_range, singular-value ratio <= max_anisotropy. Random matches fit arbitrary
+    transforms (half of them mirrored, many squashing the points onto a line); real view changes do not."""
+    a, b, c, d = L[..., 0, 0], L[..., 0, 1], L[..., 1, 0], L[..., 1, 1]
+    det = a * d - b * c
+    fro2 = a * a + b * b + c * c + d * d
+    # singular values s1 >= s2: s1^2 + s2^2 = fro2, s1 s2 = det
+    disc = np.sqrt(np.maximum(fro2 * fro2 - 4 * det * det, 0.0))
+    s1 = np.sqrt(np.maximum(0.5 * (fro2 + disc), 0.0))
+    s2 = np.sqrt(np.maximum(0.5 * (fro2 - disc), 0.0))
+    scale = np.sqrt(np.abs(det))
+    return (det > 0) & (scale >= scale_range[0]) & (scale <= scale_range[1]) & (s1 <= max_anisotropy * s2)
+
+
 def ransac(xa: np.ndarray, xb: np.ndarray, w: np.ndarray, model: GeometryModel, iterations: int,
-           threshold: float, seed: int = 0) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray] | None]:
+           threshold: float, seed: int = 0, scale_range: tuple[float, float] = (0.0, np.inf),
+           max_anisotropy: float = np.inf) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray] | None]:
     """(inlier mask, fitted transform xa -> xb or None) after a few vectorised RANSAC iterations, refined once by
-    weighted least squares on the inliers. Deterministic for a given input and seed."""
+    weighted least squares on the inliers. Hypotheses whose scale (or, for affine, mirroring / anisotropy) is
+    implausible are discarded (`_affine_ok`). Deterministic for a given input and seed."""
     k = len(xa)
     need = 2 if model is GeometryModel.SIMILARITY else 3
     none = np.zeros(k, dtype=bool), None
@@ -129,6 +157,7 @@ def ransac(xa: np.ndarray, xb: np.ndarray, w: np.ndarray, model: GeometryModel, 
         q1, q2 = qc[samples[:, 0]], qc[samples[:, 1]]
         ok = np.abs(p2 - p1) > 1e-6
         a = np.where(ok, (q2 - q1) / np.where(ok, p2 - p1, 1), 0)
+        ok &= (np.abs(a) >= scale_range[0]) & (np.abs(a) <= scale_range[1])
         b = q1 - a * p1
         r2 = np.abs(a[:, None] * pc[None, :] + b[:, None] - qc[None, :]) ** 2
         r2[~ok] = np.inf
@@ -141,6 +170,7 @@ def ransac(xa: np.ndarray, xb: np.ndarray, w: np.ndarray, model: GeometryModel, 
         M = np.zeros((iterations, 3, 2))
         if ok.any():
             M[ok] = np.linalg.solve(A[ok], B[ok])
+        ok &= _affine_ok(np.swapaxes(M[:, :2], 1, 2), scale_range, max_anisotropy)
         pred = np.einsum("kc,icd->ikd", ph, M)                       # (it, k, 2)
         r2 = np.sum((pred - xb[None]) ** 2, axis=2)
         r2[~ok] = np.inf
@@ -152,14 +182,17 @@ def ransac(xa: np.ndarray, xb: np.ndarray, w: np.ndarray, model: GeometryModel, 
         return none
     # one weighted least-squares refinement on the inliers, then re-count
     if model is GeometryModel.SIMILARITY:
-        predict = _apply_similarity(*_fit_similarity(xa[mask], xb[mask], w[mask]))
+        a_r, b_r = _fit_similarity(xa[mask], xb[mask], w[mask])
+        predict = _apply_similarity(a_r, b_r)
+        plausible = scale_range[0] <= abs(a_r) <= scale_range[1]
     else:
         ph = np.concatenate([xa, np.ones((k, 1))], axis=1)
         sw = np.sqrt(np.maximum(w[mask], 1e-12))[:, None]
         M, *_ = np.linalg.lstsq(ph[mask] * sw, xb[mask] * sw, rcond=None)
         predict = _apply_affine(M)
+        plausible = bool(_affine_ok(M[:2].T, scale_range, max_anisotropy))
     refined = np.sum((predict(xa) - xb) ** 2, axis=1) < thr2
-    if refined @ w >= mask @ w:
+    if plausible and refined @ w >= mask @ w:
         return refined, predict
     if model is GeometryModel.SIMILARITY:
         j = samples[best]
@@ -173,3 +206,22 @@ def M_best(xa: np.ndarray, xb: np.ndarray, j: np.ndarray) -> np.ndarray:
     """The affine transform through three correspondences."""
     ph = np.concatenate([xa[j], np.ones((3, 1))], axis=1)
     return np.linalg.solve(ph, xb[j])
+
+
+def transform_overlap(predict: Callable[[np.ndarray], np.ndarray], size_a: tuple[int, int],
+                      size_b: tuple[int, int]) -> float:
+    """Overlap J (intersection over union) of image b's rectangle and image a's rectangle mapped by the fitted
+    transform a -> b. For a downward camera over a planar floor (similarity transform) this is the floor-footprint
+    overlap of the two views, the very quantity that defines a loop (seed 001 eq. 3), estimated from the images."""
+    import shapely
+
+    (wa, ha), (wb, hb) = size_a, size_b
+    ca = np.array([[0.0, 0.0], [wa, 0.0], [wa, ha], [0.0, ha]])
+    pa = shapely.Polygon(predict(ca))
+    pb = shapely.box(0.0, 0.0, float(wb), float(hb))
+    if not pa.is_valid or pa.area <= 0:
+        return 0.0
+    inter = shapely.intersection(pa, pb).area
+    union = pa.area + pb.area - inter
+    return float(inter / union) if union > 0 else 0.0
+

@@ -31,6 +31,7 @@ class PairScores:
     overlap: np.ndarray                        # (P,) J from the poses given
     local: dict[int, np.ndarray] = field(default_factory=dict)
     global_: dict[int, np.ndarray] = field(default_factory=dict)
+    est_overlap: dict[int, np.ndarray] = field(default_factory=dict)   # MatchResult.overlap per mode
     usable: np.ndarray | None = None           # (P,) pairs whose label the poses can be trusted for
 
     def save(self, path) -> None:
@@ -39,6 +40,7 @@ class PairScores:
         arrays = {"pairs": self.pairs, "overlap": self.overlap}
         arrays.update({f"local_{m}": v for m, v in self.local.items()})
         arrays.update({f"global_{m}": v for m, v in self.global_.items()})
+        arrays.update({f"estoverlap_{m}": v for m, v in self.est_overlap.items()})
         if self.usable is not None:
             arrays["usable"] = self.usable
         with atomic_path(path, suffix=".npz") as tmp:
@@ -53,6 +55,8 @@ class PairScores:
                     out.local[int(k[6:])] = z[k]
                 elif k.startswith("global_"):
                     out.global_[int(k[7:])] = z[k]
+                elif k.startswith("estoverlap_"):
+                    out.est_overlap[int(k[11:])] = z[k]
         return out
 
 
@@ -114,18 +118,25 @@ def score_sequence(descs: dict[int, list], camera: CameraModel, poses: np.ndarra
         res = [match(descs[m][a], descs[m][b], p, trained) for a, b in pairs]
         out.local[m] = np.array([r.local_score for r in res])
         out.global_[m] = np.array([r.global_score for r in res])
+        out.est_overlap[m] = np.array([r.overlap for r in res])
     return out
 
 
-def fit_loop_model(scored: list[PairScores], r: float = 0.33, provenance: dict | None = None) -> LoopModel:
-    """P(J >= r | local score) and thresholds per mode from the scored pairs of one or more sequences."""
+def fit_loop_model(scored: list[PairScores], r: float = 0.33, provenance: dict | None = None,
+                   min_overlap: float | None = None) -> LoopModel:
+    """P(J >= r | local score) and thresholds per mode from the scored pairs of one or more sequences. With
+    `min_overlap`, only pairs whose verified transform implies at least that overlap are used (the database
+    rejects the others before the threshold applies)."""
     modes = sorted(scored[0].local)
-    model = LoopModel(overlap_threshold=r, provenance=provenance or {})
+    model = LoopModel(overlap_threshold=r, provenance=provenance or {}, min_overlap=min_overlap)
     keep = np.concatenate([ps.usable if ps.usable is not None else np.ones(len(ps.pairs), bool) for ps in scored])
     for m in modes:
-        s = np.concatenate([ps.local[m] for ps in scored])[keep]
-        y = (np.concatenate([ps.overlap for ps in scored]) >= r)[keep]
-        model.curves[m] = fit_curve(m, s, y)
+        s = np.concatenate([ps.local[m] for ps in scored])
+        y = np.concatenate([ps.overlap for ps in scored]) >= r
+        k = keep.copy()
+        if min_overlap is not None:
+            k &= np.concatenate([ps.est_overlap[m] for ps in scored]) >= min_overlap
+        model.curves[m] = fit_curve(m, s[k], y[k])
     return model
 
 

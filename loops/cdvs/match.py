@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 
 from loops.cdvs.codec import Descriptor
-from loops.cdvs.geometry import distrat_inliers, ransac
+from loops.cdvs.geometry import distrat_inliers, ransac, transform_overlap
 from loops.cdvs.global_desc import global_score
 from loops.cdvs.params import MatchParams
 from loops.cdvs.trained import TrainedParams, load_trained
@@ -27,6 +27,8 @@ class MatchResult:
     inliers_a: np.ndarray       # (K, 2) float32 inlier keypoints in original pixels of image a
     inliers_b: np.ndarray       # (K, 2) float32 corresponding keypoints in image b
     inlier_weights: np.ndarray  # (K,)
+    overlap: float = 0.0        # image overlap J implied by the verified transform (0 when nothing was verified);
+                                # for a downward camera the floor-footprint overlap of the two views
 
 
 def hamming_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -41,12 +43,26 @@ def hamming_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _nearest_two(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per row: index of the nearest column, its distance and the second-nearest distance."""
-    rows = np.arange(d.shape[0])
+    return _nearest_two_both(d)[0]
+
+
+def _nearest_two_both(d: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray],
+                                                 tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Nearest column of each row and nearest row of each column, each with the first and second distances.
+    Four passes over the matrix, all along contiguous memory; `d` is modified temporarily and restored."""
+    big = np.iinfo(d.dtype).max
+    rows, cols = np.arange(d.shape[0]), np.arange(d.shape[1])
     j = d.argmin(axis=1)
-    d1 = d[rows, j].astype(np.float64)
-    e = d.copy()
-    e[rows, j] = np.iinfo(d.dtype).max
-    return j, d1, e.min(axis=1).astype(np.float64)
+    i = d.argmin(axis=0)
+    d1r, d1c = d[rows, j], d[i, cols]
+    d[rows, j] = big
+    d2r = d.min(axis=1)
+    d[rows, j] = d1r
+    d[i, cols] = big
+    d2c = d.min(axis=0)
+    d[i, cols] = d1c
+    f = np.float64
+    return (j, d1r.astype(f), d2r.astype(f)), (i, d1c.astype(f), d2c.astype(f))
 
 
 def _pad8(x: np.ndarray) -> np.ndarray:
@@ -59,36 +75,46 @@ def _one_way(j: np.ndarray, d1: np.ndarray, d2: np.ndarray, ratio: float,
              max_d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     ok = (d1 <= ratio * d2) & (d1 <= max_d) & (d2 > 0) & (j >= 0)
     i = np.flatnonzero(ok)
+    jj = j[i]
     w = np.cos(0.5 * np.pi * np.sqrt(d1[i] / d2[i]))
-    # keep, for each matched column, only its best-weighted row
-    o = np.argsort(-w, kind="stable")
-    _, first = np.unique(j[i][o], return_index=True)
+    # keep, for each matched column, only its best-weighted row (ties: the lowest row)
+    o = np.lexsort((-w, jj))
+    first = np.ones(len(o), dtype=bool)
+    first[1:] = jj[o[1:]] != jj[o[:-1]]
     sel = o[first]
-    return i[sel], j[i][sel], w[sel]
+    return i[sel], jj[sel], w[sel]
 
 
 def local_matches(a: Descriptor, b: Descriptor, p: MatchParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Two-way ratio-tested matches (ia, ib, weights), CDVS-style union of both directions."""
+    """Two-way ratio-tested matches (ia, ib, weights), CDVS-style union of both directions: pairs found both
+    ways get the mean weight, one-way pairs their own, scaled down when they outnumber the two-way ones."""
     if a.n_local < 2 or b.n_local < 2:
         e = np.zeros(0, dtype=np.int64)
         return e, e, np.zeros(0)
     n_bytes = min(a.local.shape[1], b.local.shape[1])   # priority-ordered bits: compare the common prefix
     hd = hamming_matrix(_pad8(a.local[:, :n_bytes]), _pad8(b.local[:, :n_bytes]))
     max_d = p.max_distance_frac * 8 * n_bytes
-    i1, j1, w1 = _one_way(*_nearest_two(hd), p.ratio, max_d)
-    j2, i2, w2 = _one_way(*_nearest_two(hd.T), p.ratio, max_d)
-    nb = b.n_local
-    k1, k2 = i1 * nb + j1, i2 * nb + j2
-    both, x1, x2 = np.intersect1d(k1, k2, return_indices=True)
-    only1 = np.setdiff1d(np.arange(len(k1)), x1)
-    only2 = np.setdiff1d(np.arange(len(k2)), x2)
+    ab, ba = _nearest_two_both(hd)
+    i1, j1, w1 = _one_way(*ab, p.ratio, max_d)         # a -> b
+    j2, i2, w2 = _one_way(*ba, p.ratio, max_d)         # b -> a
+    back = np.full(b.n_local, -1, dtype=np.int64)       # per b feature: its entry in the b -> a list
+    back[j2] = np.arange(len(j2))
+    k = back[j1]
+    mutual = k >= 0
+    mutual[mutual] = i2[k[mutual]] == i1[mutual]
+    x1 = np.flatnonzero(mutual)
+    x2 = k[x1]
+    only1 = np.flatnonzero(~mutual)
+    in2 = np.zeros(len(j2), dtype=bool)
+    in2[x2] = True
+    only2 = np.flatnonzero(~in2)
     w_both = 0.5 * (w1[x1] + w2[x2])
     w_one = np.concatenate([w1[only1], w2[only2]])
-    if len(w_one) > len(both) and len(w_one):
-        w_one = w_one * (len(both) / len(w_one))
-    keys = np.concatenate([both, k1[only1], k2[only2]])
-    w = np.concatenate([w_both, w_one])
-    return keys // nb, keys % nb, w
+    if len(w_one) > len(x1) and len(w_one):
+        w_one = w_one * (len(x1) / len(w_one))
+    ia = np.concatenate([i1[x1], i1[only1], i2[only2]])
+    ib = np.concatenate([j1[x1], j1[only1], j2[only2]])
+    return ia, ib, np.concatenate([w_both, w_one])
 
 
 def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
@@ -112,7 +138,8 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     if len(keep) < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     thr = p.ransac_threshold_frac * float(np.hypot(*b.proc_size))
-    ok, predict = ransac(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, thr)
+    ok, predict = ransac(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, thr,
+                         scale_range=p.scale_range, max_anisotropy=p.max_anisotropy)
     if predict is None or ok.sum() < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     inl = ok if len(top) == len(w) else None
@@ -120,4 +147,4 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     if len(final) < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     return MatchResult(g, float(w[final].sum()), len(w), len(final), a.keypoints[ia[final]], b.keypoints[ib[final]],
-                       w[final])
+                       w[final], transform_overlap(predict, a.proc_size, b.proc_size))

@@ -85,6 +85,10 @@ class LoopModel:
     overlap_threshold: float = 0.33
     curves: dict[int, ModeCurve] = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
+    # When set, a candidate is a loop only if the overlap implied by its verified transform (MatchResult.overlap)
+    # is at least this, and the curves were fitted on such pairs only: the local score then no longer has to
+    # separate a true loop on a feature-poor floor from a near miss (J just under r) on a feature-rich one.
+    min_overlap: float | None = None
 
     def probability(self, mode: int, score: float | np.ndarray) -> float | np.ndarray:
         return self._curve(mode).prob(score)
@@ -100,7 +104,7 @@ class LoopModel:
     # ------------------------------------------------------------------ I/O
     def to_dict(self) -> dict:
         return {"format": FORMAT, "version": VERSION, "overlap_threshold": self.overlap_threshold,
-                "score": "local", "provenance": self.provenance,
+                "score": "local", "min_overlap": self.min_overlap, "provenance": self.provenance,
                 "modes": {str(m): {"threshold": (c.threshold if math.isfinite(c.threshold) else None),
                                    "edges": c.edges.tolist(), "probability": c.probability.round(6).tolist(),
                                    "positives": c.positives.astype(int).tolist(),
@@ -141,7 +145,11 @@ class LoopModel:
             if len(edges) != len(prob) or np.any(np.diff(edges) <= 0) or np.any((prob < 0) | (prob > 1)):
                 raise ValueError(f"{source}: mode {key}: edges must increase and match the probabilities in [0, 1]")
             curves[m] = ModeCurve(m, edges, prob, pos, tot, thr)
-        return cls(float(d.get("overlap_threshold", 0.33)), curves, d.get("provenance", {}))
+        mo = d.get("min_overlap")
+        if mo is not None and not (isinstance(mo, (int, float)) and 0.0 <= mo <= 1.0):
+            raise ValueError(f"{source}: field 'min_overlap' must be null or a number in [0, 1], got {mo!r}")
+        return cls(float(d.get("overlap_threshold", 0.33)), curves, d.get("provenance", {}),
+                   None if mo is None else float(mo))
 
     @classmethod
     def default(cls) -> "LoopModel":

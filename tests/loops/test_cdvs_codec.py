@@ -155,3 +155,10 @@ def test_budget_holds_on_random_crops_of_real_textures(shared_data):
             worst[m] = max(worst[m], len(data))
             assert len(data) <= BUDGETS[m]
     assert worst[6] > 4096  # the large modes are actually used, not trivially small
+
+
+def test_trained_global_weights_never_favour_farther_signatures():
+    from loops.cdvs import load_trained
+
+    w = load_trained().global_weights
+    assert np.all(np.diff(w) <= 0) and w[0] > 0 > w[-1]

@@ -89,3 +89,24 @@ def test_detector_skips_unreadable_frames(frames):
     rows, st = detect_loops(items, 2, db_params=DatabaseParams(exclude_recent=0))
     assert st.frames == 2 and st.skipped == 1
     assert all(r.query_frame == 2 and r.candidate.frame_id == 0 for r in rows)
+
+
+def test_min_overlap_rejects_verified_matches_that_overlap_too_little(descs):
+    # frames 0 and 1 are 70 px apart on a 640 px wide view: J ~ 0.8
+    loose = LoopDatabase(4, db_params=DatabaseParams(shortlist=1, exclude_recent=0), threshold=0.0)
+    strict = LoopDatabase(4, db_params=DatabaseParams(shortlist=1, exclude_recent=0, min_overlap=0.95),
+                          threshold=0.0)
+    for db in (loose, strict):
+        db.add(0, descs[0])
+    c_loose, c_strict = loose.query(descs[1], 1)[0], strict.query(descs[1], 1)[0]
+    assert 0.6 < c_loose.match.overlap < 0.95
+    assert c_loose.accepted and not c_strict.passes
+
+
+def test_min_overlap_comes_from_the_model_unless_given(descs):
+    from loops.cdvs.model import LoopModel
+
+    model = LoopModel.default()
+    db = LoopDatabase(4, model=model)
+    assert db.min_overlap == (model.min_overlap or 0.0)
+    assert LoopDatabase(4, db_params=DatabaseParams(min_overlap=0.5), model=model).min_overlap == 0.5

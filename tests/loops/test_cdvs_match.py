@@ -112,3 +112,65 @@ def test_empty_descriptors_match_with_zero_scores():
     blank = extract(np.full((480, 640), 90, np.uint8), 3)
     r = match(blank, extract(view(700, 600), 3))
     assert r.local_score == 0 and r.n_inliers == 0 and r.global_score == 0
+
+
+def test_ransac_rejects_implausible_transforms():
+    rng = np.random.default_rng(3)
+    xa, xb = _true_matches(30, rng)
+    w = np.ones(30)
+    mirrored = xb * [-1.0, 1.0] + [640.0, 0.0]                 # a reflection: no camera motion produces it
+    lim = dict(scale_range=MatchParams().scale_range, max_anisotropy=MatchParams().max_anisotropy)
+    assert ransac(xa, mirrored, w, GeometryModel.AFFINE, 24, 3.0, **lim)[0].sum() < MatchParams().min_inliers
+    assert ransac(xa, xb, w, GeometryModel.AFFINE, 24, 3.0, **lim)[0].sum() >= 25
+    # a downward camera at a fixed height sees the floor at scale ~1: a 2x "zoom" is no loop
+    zoom = 2.0 * xa + [10.0, 5.0]
+    assert ransac(xa, zoom, w, GeometryModel.SIMILARITY, 24, 3.0)[0].sum() == 30
+    assert ransac(xa, zoom, w, GeometryModel.SIMILARITY, 24, 3.0, scale_range=(0.8, 1.25))[1] is None
+
+
+def test_verified_transform_gives_the_image_overlap():
+    from loops.cdvs.geometry import transform_overlap
+
+    def shift(dx):
+        return lambda x: x + [dx, 0.0]
+
+    assert transform_overlap(shift(0.0), (640, 480), (640, 480)) == pytest.approx(1.0)
+    assert transform_overlap(shift(320.0), (640, 480), (640, 480)) == pytest.approx(1 / 3)
+    assert transform_overlap(shift(700.0), (640, 480), (640, 480)) == 0.0
+    a = extract(view(700, 600), 4, CdvsParams.floor(4))
+    b = extract(view(860, 600), 4, CdvsParams.floor(4))             # 160 px shift of 640: J = 480 / 800 = 0.6
+    r = match(a, b, CdvsParams.floor(4).matching)
+    assert r.overlap == pytest.approx(0.6, abs=0.03)
+    assert match(a, extract(view(1400, 1100), 4, CdvsParams.floor(4)), CdvsParams.floor(4).matching).overlap == 0.0
+
+
+def test_two_way_union_matches_the_reference_definition():
+    """The vectorised union equals the CDVS definition written with Python sets."""
+    from loops.cdvs.match import _nearest_two, hamming_matrix, local_matches
+
+    a, b = extract(view(700, 600), 3), extract(view(760, 640, angle=20), 3)
+    p = MatchParams()
+    ia, ib, w = local_matches(a, b, p)
+    d = hamming_matrix(np.pad(a.local, ((0, 0), (0, (-a.local.shape[1]) % 8))),
+                       np.pad(b.local, ((0, 0), (0, (-b.local.shape[1]) % 8))))
+    max_d = p.max_distance_frac * 8 * a.local.shape[1]
+
+    def one_way(dm):
+        best = {}
+        j, d1, d2 = _nearest_two(dm.copy())
+        for i in range(len(j)):
+            if d2[i] > 0 and d1[i] <= p.ratio * d2[i] and d1[i] <= max_d:
+                wt = np.cos(0.5 * np.pi * np.sqrt(d1[i] / d2[i]))
+                if j[i] not in best or wt > best[j[i]][1]:
+                    best[j[i]] = (i, wt)
+        return {(i, jj): wt for jj, (i, wt) in best.items()}
+
+    m1 = one_way(d)
+    m2 = {(i, j): wt for (j, i), wt in one_way(d.T).items()}
+    both = set(m1) & set(m2)
+    one = [(k, m1[k]) for k in m1 if k not in both] + [(k, m2[k]) for k in m2 if k not in both]
+    scale = len(both) / len(one) if len(one) > len(both) else 1.0
+    ref = {k: 0.5 * (m1[k] + m2[k]) for k in both} | {k: wt * scale for k, wt in one}
+    got = {(int(x), int(y)): float(v) for x, y, v in zip(ia, ib, w)}
+    assert got.keys() == ref.keys() and len(got) == len(ia) > 20
+    assert all(abs(got[k] - ref[k]) < 1e-9 for k in ref)

@@ -48,14 +48,14 @@ def test_fit_curve_threshold_is_the_lowest_certain_score():
 
 def test_model_save_load_round_trip(tmp_path):
     rng = np.random.default_rng(1)
-    m = LoopModel(0.33, provenance={"note": "test"})
+    m = LoopModel(0.33, provenance={"note": "test"}, min_overlap=0.38)
     for mode in (1, 4):
         s = rng.uniform(0, 20, 200)
         m.curves[mode] = fit_curve(mode, s, s + rng.normal(0, 3, 200) > 10)
     path = tmp_path / "model.json"
     m.save(path)
     back = LoopModel.load(path)
-    assert back.overlap_threshold == 0.33 and back.provenance == {"note": "test"}
+    assert back.overlap_threshold == 0.33 and back.provenance == {"note": "test"} and back.min_overlap == 0.38
     for mode in (1, 4):
         assert back.threshold(mode) == pytest.approx(m.threshold(mode))
         for s in (0.0, 3.3, 9.9, 15.0, 1e6):
@@ -66,6 +66,7 @@ def test_model_save_load_round_trip(tmp_path):
 
 @pytest.mark.parametrize("text,msg", [("{", "invalid JSON"), ('{"format": "x"}', "not a loop model"),
                                       ('{"format": "vslam-loop-model", "version": 99}', "version"),
+                                      ('{"format": "vslam-loop-model", "version": 1, "min_overlap": 2}', "min_overlap"),
                                       ('{"format": "vslam-loop-model", "version": 1, "modes": {"3": {"edges": [0, 1]}}}',
                                        "mode 3")])
 def test_bad_model_files_raise_clear_errors(tmp_path, text, msg):
@@ -83,3 +84,20 @@ def test_default_model_ships_all_modes():
         assert m.probability(mode, 1e6) == 1.0
         assert 0 < m.threshold(mode) < 1e3
     assert json.dumps(m.to_dict())
+
+
+def test_fit_with_min_overlap_uses_only_pairs_whose_transform_overlaps_enough():
+    from loops.cdvs.loop_training import PairScores, fit_loop_model
+
+    rng = np.random.default_rng(2)
+    n = 400
+    J = rng.uniform(0, 1, n)
+    local = 40 * J + rng.normal(0, 2, n)              # near misses (J just under r) score as high as true loops
+    est = J + rng.normal(0, 0.01, n)                  # the verified transform knows the overlap
+    ps = PairScores(np.zeros((n, 2), int), J, {4: local}, {4: np.zeros(n)}, {4: est})
+    plain = fit_loop_model([ps], 0.33)
+    gated = fit_loop_model([ps], 0.33, min_overlap=0.38)
+    assert gated.min_overlap == 0.38 and plain.min_overlap is None
+    assert gated.threshold(4) < plain.threshold(4)
+    acc = (local >= gated.threshold(4)) & (est >= 0.38)
+    assert not np.any(acc & (J < 0.33))               # still no false loop

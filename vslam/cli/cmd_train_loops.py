@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-sigma", type=float, default=0.02,
                    help="use a pair's label only if the fused relative position is known to this many metres "
                         "(or the images are certainly apart); default 0.02")
+    p.add_argument("--min-overlap", type=float, default=None,
+                   help="a loop also needs the overlap implied by the verified transform >= this (default: the "
+                        "overlap threshold + 0.05; a negative value turns the check off)")
     p.add_argument("--cache", help="directory to keep per-sequence pair scores (re-fits skip the matching)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-plot", action="store_true")
@@ -85,7 +88,7 @@ def run(a: argparse.Namespace) -> int:
         idx = np.arange(0, len(seq), a.every)
         key = f"{Path(path).resolve().name}-{zlib.crc32(str(Path(path).resolve()).encode()):08x}-" \
               f"{trained.params_id:04x}-e{a.every}-x{a.exclude_recent}-" \
-              f"s{a.shortlist}-r{a.random}-{a.seed}-{''.join(map(str, modes))}.npz"
+              f"s{a.shortlist}-r{a.random}-{a.seed}-{''.join(map(str, modes))}-v2.npz"
         cached = Path(a.cache) / key if a.cache else None
         if cached is not None and cached.is_file():
             ps = PairScores.load(cached)
@@ -116,7 +119,11 @@ def run(a: argparse.Namespace) -> int:
                   "random": a.random, "seed": a.seed, "descriptor_params_id": trained.params_id,
                   "max_sigma": a.max_sigma,
                   "descriptor_preset": "CdvsParams.floor"}
-    model = fit_loop_model(scored, a.overlap, provenance)
+    min_overlap = a.overlap + 0.05 if a.min_overlap is None else (None if a.min_overlap < 0 else a.min_overlap)
+    if min_overlap is not None and min_overlap > 1:
+        raise ValueError(f"--min-overlap must be <= 1, got {a.min_overlap}")
+    provenance["min_overlap"] = min_overlap
+    model = fit_loop_model(scored, a.overlap, provenance, min_overlap=min_overlap)
     out = Path(a.out)
     model.save(out)
     if not a.no_plot:
