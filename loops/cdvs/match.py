@@ -34,10 +34,13 @@ class MatchResult:
 def hamming_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """All-pairs Hamming distances (Na, Nb) of packed descriptors whose length is a multiple of 8 bytes.
     XOR + popcount per 64-bit word in numpy: no BLAS, ~2x faster than two OpenCV batchDistance K=2 calls."""
-    wa, wb = a.view(np.uint64), b.view(np.uint64)
-    d = np.bitwise_count(wa[:, None, 0] ^ wb[None, :, 0]).astype(np.uint16)
-    for w in range(1, wa.shape[1]):
-        d += np.bitwise_count(wa[:, None, w] ^ wb[None, :, w])
+    wa, wb = a.view(np.uint64).T.copy(), b.view(np.uint64).T.copy()    # one contiguous row per 64-bit word
+    t = np.empty((wa.shape[1], wb.shape[1]), dtype=np.uint64)
+    c = np.empty(t.shape, dtype=np.uint8)
+    d = np.zeros(t.shape, dtype=np.uint16)
+    for w in range(wa.shape[0]):     # preallocated temporaries: no allocation per word
+        np.bitwise_xor(wa[w][:, None], wb[w][None, :], out=t)
+        np.add(d, np.bitwise_count(t, out=c), out=d)
     return d
 
 
@@ -68,7 +71,11 @@ def _nearest_two_both(d: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray, np.n
 def _pad8(x: np.ndarray) -> np.ndarray:
     """Pad rows to a multiple of 8 bytes with zeros (zeros do not change Hamming distances)."""
     extra = (-x.shape[1]) % 8
-    return np.ascontiguousarray(np.pad(x, ((0, 0), (0, extra))) if extra else x)
+    if not extra:
+        return np.ascontiguousarray(x)
+    out = np.zeros((x.shape[0], x.shape[1] + extra), dtype=np.uint8)   # (np.pad costs ~50 us per call)
+    out[:, : x.shape[1]] = x
+    return out
 
 
 def _one_way(j: np.ndarray, d1: np.ndarray, d2: np.ndarray, ratio: float,

@@ -53,7 +53,7 @@ class MatchParams:
     ratio: float = 0.90            # Lowe ratio on Hamming distances (d1 <= ratio * d2)
     max_distance_frac: float = 0.30  # reject nearest neighbours farther than this fraction of the bits
     min_matches: int = 5           # below this, no geometric check (local score 0)
-    max_geometry_matches: int = 96  # DISTRAT + RANSAC see at most this many best-weighted matches (cost ~ K^2)
+    max_geometry_matches: int = 64  # DISTRAT + RANSAC see at most this many best-weighted matches (cost ~ K^2)
     distrat_chi2: float = 29.5435  # chi-square(24 dof) 80th percentile: below it the LDR histogram looks like outliers
     ransac_iterations: int = 24    # "a few RANSAC iterations" after DISTRAT (deterministic, seeded)
     ransac_threshold_frac: float = 0.01  # inlier threshold as a fraction of the processed image diagonal (8 px)
@@ -102,7 +102,7 @@ MODE_PRESETS: dict[int, ModeParams] = {
     2: ModeParams(2, BUDGETS[2], desc_bits=64, max_local=120, global_clusters=20, coord_block=3),
     3: ModeParams(3, BUDGETS[3], desc_bits=80, max_local=200, global_clusters=20, coord_block=3),
     4: ModeParams(4, BUDGETS[4], desc_bits=96, max_local=300, global_clusters=20, coord_block=2),
-    5: ModeParams(5, BUDGETS[5], desc_bits=128, max_local=320, global_clusters=20, coord_block=2),
-    6: ModeParams(6, BUDGETS[6], desc_bits=192, max_local=320, global_clusters=20, coord_block=2),
+    5: ModeParams(5, BUDGETS[5], desc_bits=128, max_local=300, global_clusters=20, coord_block=2),
+    6: ModeParams(6, BUDGETS[6], desc_bits=192, max_local=300, global_clusters=20, coord_block=2),
 }
 FLOOR_GLOBAL_CLUSTERS = {1: 20, 2: 40, 3: 64, 4: 128, 5: 128, 6: 128}
