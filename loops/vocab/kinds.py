@@ -10,6 +10,11 @@ import enum
 import numpy as np
 
 
+_BYTE_HIST_BINS = 1 << 20   # largest (cluster, byte, value) histogram cluster_sums builds instead of unpacking bits
+_BYTE_BITS = np.unpackbits(np.arange(256, dtype=np.uint8)[:, None], axis=1).astype(np.float64)  # (256, 8), MSB first
+_BYTE_BITS.setflags(write=False)
+
+
 class DescriptorKind(str, enum.Enum):
     BINARY = "binary"
     FLOAT = "float"
@@ -79,9 +84,10 @@ def cluster_sums(kind: DescriptorKind, x: np.ndarray, labels: np.ndarray, n_clus
                  bits: np.ndarray | None = None, weights: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Per cluster: the sum of its rows (bit counts, int32, for binary rows; float64 sums for float rows) and its
-    size. Computed as one sparse product (one-hot cluster x row) @ rows: exact in integers, no BLAS (whose threads
-    stall on a loaded machine) and no slow scatter-adds. Pass `bits` = unpacked_bits(x) to save unpacking;
-    `weights` (+1 / -1 per row) turns the sums into signed updates."""
+    size. Few binary clusters: a histogram of the packed bytes; otherwise one sparse product (one-hot cluster x row)
+    @ rows. Both are exact in integers, with no BLAS over the rows (whose threads stall on a loaded machine) and no
+    slow scatter-adds. Pass `bits` = unpacked_bits(x) to save unpacking; `weights` (+1 / -1 per row) turns the sums
+    into signed updates."""
     from scipy.sparse import csr_matrix
 
     sizes = np.bincount(labels, minlength=n_clusters)
@@ -101,10 +107,6 @@ def cluster_sums(kind: DescriptorKind, x: np.ndarray, labels: np.ndarray, n_clus
     data = np.ones(len(x), dtype) if weights is None else np.asarray(weights, dtype)
     onehot = csr_matrix((data, (labels, np.arange(len(x)))), shape=(n_clusters, len(x)))
     return np.asarray(onehot @ rows, dtype), sizes
-
-
-_BYTE_HIST_BINS = 1 << 20
-_BYTE_BITS = np.unpackbits(np.arange(256, dtype=np.uint8)[:, None], axis=1).astype(np.float64)  # (256, 8), MSB first
 
 
 def centres_from_sums(kind: DescriptorKind, sums: np.ndarray, sizes: np.ndarray, dtype) -> np.ndarray:

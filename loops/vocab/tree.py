@@ -8,8 +8,8 @@ it level by level for all descriptors at once:
     word     (n_nodes,)    int32 word id of each leaf, -1 for inner nodes
 
 Like DBoW2, a node with at most k descriptors gets one child per distinct descriptor, so leaves can sit above
-depth L. The tree is built level by level, all nodes of a level clustered in one vectorised k-means (a Python loop
-over nodes made the paper's k = 8, L = 8 tree Python-bound); the same descriptors and seed give the same tree.
+depth L. The tree is built level by level, all nodes of a level clustered in one vectorised k-means (kmeans.py);
+the same descriptors and seed give the same tree.
 """
 from __future__ import annotations
 

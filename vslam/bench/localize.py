@@ -740,7 +740,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"== {name}: {len(ps.keys)} key images, {len(ps.queries)} queries", flush=True)
             res = bench.run_set(ps, args.descriptors)
             table = format_paper_table(res.rows)
-            skipped = "".join(f"\n- {d}: skipped ({why})" for d, why in res.skipped.items())
+            # only colour vocabularies on grayscale sets are skipped: one line for them
+            skipped = "".join(f"\n{', '.join(res.skipped)}: skipped ({why.replace(d, '/'.join(res.skipped))})"
+                              for d, why in list(res.skipped.items())[:1])
             md.append(f"#### {name}\n\n{ps.note}.\n\n{table}\n{skipped}\n")
             save_pr_plot(out / f"pr_{name}.png", res.curves, f"{name}: top-1 precision-recall")
             report["sets"][name] = {"note": ps.note, "n_keys": len(ps.keys), "n_queries": len(ps.queries),
