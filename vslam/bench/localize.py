@@ -284,7 +284,7 @@ class PydbowMemory:
     """The `pydbow` package (PyPI, pure-Python DBoW) behind the VisualMemory query interface, fed with our
     descriptors. Its Vocabulary() runs ORB itself, so the tree is built with its own initialize_tree() on our
     descriptors instead; its k-means draws from numpy's global generator, which is seeded here. It has no notion of
-    key-to-key similarity restricted to candidates (it scores every key, ~0.3-0.5 for unrelated images), so mu2
+    key-to-key similarity restricted to candidates (it scores every key; wrong keys ~0.5 on the pairs set), so mu2
     is not computed for it."""
 
     def __init__(self, key_descs: list[np.ndarray], key_names: list[str], params, k: int, depth: int,
