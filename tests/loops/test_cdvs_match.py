@@ -1,0 +1,113 @@
+"""Matching: score monotonicity, DISTRAT + RANSAC geometric check, mixed modes."""
+import cv2
+import numpy as np
+import pytest
+
+from loops.cdvs import CdvsParams, GeometryModel, IncompatibleDescriptorsError, MatchParams, extract, match
+from loops.cdvs.geometry import distrat_inliers, ransac
+from tests.loops.test_cdvs_codec import texture
+
+BIG = texture(11, 1400, 1800)
+
+
+def view(x: int, y: int, angle: float = 0.0, w: int = 640, h: int = 480) -> np.ndarray:
+    """A downward-camera-like view of the big texture: window centred at (x, y), rotated by `angle` degrees."""
+    M = cv2.getRotationMatrix2D((x, y), angle, 1.0)
+    M[:, 2] += [w / 2 - x, h / 2 - y]
+    return cv2.warpAffine(BIG, M, (w, h), flags=cv2.INTER_LINEAR)
+
+
+@pytest.mark.parametrize("mode", [2, 4, 6])
+def test_scores_identical_gt_overlapping_gt_disjoint(mode):
+    a = extract(view(700, 600), mode)
+    same = match(a, extract(view(700, 600), mode))
+    overlap = match(a, extract(view(830, 640, angle=25), mode))   # ~60 % of the area in common, rotated
+    disjoint = match(a, extract(view(1400, 1100), mode))
+    assert same.local_score > overlap.local_score > disjoint.local_score
+    assert same.global_score > overlap.global_score > disjoint.global_score
+    assert disjoint.n_inliers == 0 and overlap.n_inliers >= 8
+
+
+def test_inlier_pairs_follow_the_true_motion():
+    a, b = extract(view(700, 600), 5), extract(view(760, 620, angle=10), 5)
+    r = match(a, b, CdvsParams.floor(5).matching)
+    assert r.n_inliers >= 15
+    # b shows the window centred at (760, 620) rotated by 10 deg about its centre
+    M = cv2.getRotationMatrix2D((760, 620), 10, 1.0)
+    M[:, 2] += [320 - 760, 240 - 620]
+    M0 = cv2.getRotationMatrix2D((700, 600), 0, 1.0)
+    M0[:, 2] += [320 - 700, 240 - 600]
+    big_pts = r.inliers_a - M0[:, 2]                       # view a -> big texture
+    pred = big_pts @ M[:, :2].T + M[:, 2]
+    err = np.linalg.norm(pred - r.inliers_b, axis=1)
+    assert np.median(err) < 3.0 and np.mean(err < 6) > 0.9
+
+
+def _true_matches(n: int, rng: np.random.Generator):
+    xa = rng.uniform(0, 640, (n, 2))
+    th, s, t = 0.4, 1.1, np.array([30.0, -20.0])
+    R = s * np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    return xa, xa @ R.T + t + rng.normal(0, 0.7, (n, 2))
+
+
+def test_distrat_finds_inliers_among_outliers():
+    rng = np.random.default_rng(0)
+    xa, xb = _true_matches(40, rng)
+    out_a, out_b = rng.uniform(0, 640, (25, 2)), rng.uniform(0, 640, (25, 2))
+    inl = distrat_inliers(np.vstack([xa, out_a]), np.vstack([xb, out_b]), MatchParams().distrat_chi2)
+    assert len(inl) >= 30
+    assert np.mean(inl < 40) > 0.9  # nearly all selected are true matches
+
+
+def test_geometric_check_rejects_a_shuffled_match_set():
+    rng = np.random.default_rng(1)
+    xa, xb = _true_matches(60, rng)
+    rejected = 0
+    for k in range(10):
+        perm = np.random.default_rng(k).permutation(len(xb))
+        inl = distrat_inliers(xa, xb[perm], MatchParams().distrat_chi2)
+        if len(inl) >= MatchParams().min_inliers:
+            ok = ransac(xa[inl], xb[perm][inl], np.ones(len(inl)), GeometryModel.AFFINE, 24, 12.0)
+            rejected += ok.sum() < MatchParams().min_inliers
+        else:
+            rejected += 1
+    assert rejected == 10
+    # the same points, correctly paired, pass
+    assert len(distrat_inliers(xa, xb, MatchParams().distrat_chi2)) >= 50
+
+
+def test_shuffled_descriptors_give_no_local_score():
+    a, b = extract(view(700, 600), 4), extract(view(760, 620), 4)
+    assert match(a, b).local_score > 5
+    rng = np.random.default_rng(0)
+    b_shuffled = type(b)(**{**b.__dict__, "xy": b.xy[rng.permutation(b.n_local)]})
+    assert match(a, b_shuffled).n_inliers == 0
+
+
+def test_ransac_is_deterministic():
+    rng = np.random.default_rng(2)
+    xa, xb = _true_matches(30, rng)
+    w = np.ones(30)
+    for model in GeometryModel:
+        m1 = ransac(xa, xb, w, model, 12, 3.0)
+        assert np.array_equal(m1, ransac(xa, xb, w, model, 12, 3.0)) and m1.sum() >= 25
+
+
+def test_mixed_modes_match_on_the_common_bits():
+    a, b = extract(view(700, 600), 2), extract(view(760, 620), 6)
+    r = match(a, b)
+    assert r.n_inliers >= 5 and r.local_score > 0
+    assert abs(r.global_score - match(b, a).global_score) < 1e-6
+
+
+def test_incompatible_trained_parameters_are_refused():
+    a = extract(view(700, 600), 1)
+    other = type(a)(**{**a.__dict__, "params_id": (a.params_id + 1) & 0xFFFF})
+    with pytest.raises(IncompatibleDescriptorsError):
+        match(a, other)
+
+
+def test_empty_descriptors_match_with_zero_scores():
+    blank = extract(np.full((480, 640), 90, np.uint8), 3)
+    r = match(blank, extract(view(700, 600), 3))
+    assert r.local_score == 0 and r.n_inliers == 0 and r.global_score == 0
