@@ -13,7 +13,7 @@ from vslam.pipeline import Pipeline, PipelineConfig
 from vslam.pipeline.dataclass_io import ConfigError
 from vslam.sim import SimConfig, simulate
 
-SIM = SimConfig(width=320, height=240, focal=250.0, length=6.0, fps=15.0, speed=0.5, seed=4)
+SIM = SimConfig(length=6.0, fps=15.0, speed=0.5, seed=4)
 
 
 @pytest.fixture(scope="module")

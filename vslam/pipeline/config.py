@@ -29,8 +29,10 @@ from vslam.pipeline.dataclass_io import ConfigError, from_dict, to_dict
 class KeyframePolicy:
     """When a frame becomes a loop keyframe (and a pose-graph node): after the robot moved or turned enough."""
 
-    distance: float = 0.12           # metres travelled since the last keyframe
-    angle_deg: float = 12.0          # or degrees turned
+    # 0.25 m is well inside the 0.64 x 0.48 m footprint of the default camera: a revisit always finds a stored
+    # keyframe within 0.125 m along the track, so J >= 0.33 loops are not missed for lack of keyframes
+    distance: float = 0.25           # metres travelled since the last keyframe
+    angle_deg: float = 20.0          # or degrees turned
     max_frames: int = 60             # or frames elapsed (keeps the graph connected when standing still)
 
     def __post_init__(self) -> None:
@@ -47,6 +49,9 @@ class LoopConfig:
     model: str | None = None         # P(loop|score) model JSON; None = the model shipped with the package
     floor_preset: bool = True        # similarity geometry for a downward camera (CdvsParams.floor)
     database: DatabaseParams = field(default_factory=DatabaseParams)
+    # keyframes this far back along the path (metres) are not loop candidates; sets database.exclude_recent from
+    # the keyframe spacing (None: use database.exclude_recent as given)
+    exclude_distance: float | None = 2.0
     pose_threshold_px: float = 3.0   # RANSAC threshold of the floor-plane fit of a loop's inlier pairs
     min_pose_inliers: int = 12       # fewer consistent pairs: the loop gives no pose and is not used
     pose_pixel_sigma: float = 1.0    # pixel noise of decoded keypoints (coarse coordinate coding)
@@ -54,6 +59,8 @@ class LoopConfig:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ValueError(f"loops.mode must be one of {list(MODES)}, got {self.mode!r}")
+        if self.exclude_distance is not None and self.exclude_distance < 0:
+            raise ValueError("loops.exclude_distance must be >= 0 metres")
 
 
 @dataclass(frozen=True)
@@ -105,6 +112,15 @@ class PipelineConfig:
             return cls.from_dict(data)
         except ConfigError as exc:
             raise ConfigError(f"{path}: {exc}") from None
+
+    def database_params(self) -> DatabaseParams:
+        """The loop database settings, with the recent-keyframe exclusion converted from metres to keyframes."""
+        db = self.loops.database
+        if self.loops.exclude_distance is None:
+            return db
+        import math
+
+        return dataclasses.replace(db, exclude_recent=int(math.ceil(self.loops.exclude_distance / self.keyframes.distance)))
 
     def dumps(self) -> str:
         return yaml.safe_dump(json.loads(json.dumps(self.to_dict())), sort_keys=False)

@@ -42,7 +42,7 @@ def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = T
     write_g2o(out / "graph.g2o", result.graph, poses)
     run_info = {"sequence": str(Path(result.sequence).resolve()) if result.sequence else None,
                 "camera": result.camera.to_dict(), "keyframes": result.keyframes.tolist(),
-                "loop_min_separation": int(result.config.loops.database.exclude_recent) + 1,
+                "loop_min_separation": int(result.config.database_params().exclude_recent) + 1,
                 "config": result.config.to_dict()}
     atomic_write_text(out / "run.json", json.dumps(run_info, indent=1) + "\n")
     metrics = {"summary": result.summary()}
@@ -80,7 +80,7 @@ def _evaluate(result, seq) -> dict:
                           np.array([l.global_score for l in L]), np.array([l.local_score for l in L]),
                           np.array([l.probability for l in L]), np.array([l.accepted for l in L]),
                           np.array([bool(l.inlier) for l in L]))
-        kw = dict(queried=result.keyframes, min_separation=result.config.loops.database.exclude_recent + 1)
+        kw = dict(queried=result.keyframes, min_separation=result.config.database_params().exclude_recent + 1)
         out["loops"] = {"accepted": loop_precision_recall(result.camera, gt_frames, table, **kw),
                         "kept_by_back_end": loop_precision_recall(result.camera, gt_frames, table, use_inliers=True, **kw)}
     return out

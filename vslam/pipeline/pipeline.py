@@ -133,7 +133,7 @@ class Pipeline:
         lc = cfg.loops
         self.model = LoopModel.load(lc.model) if lc.model else _default_model()
         self.cdvs_params = CdvsParams.floor(lc.mode) if lc.floor_preset else CdvsParams.for_mode(lc.mode)
-        self.db = LoopDatabase(lc.mode, self.cdvs_params, lc.database, model=self.model) if lc.enabled else None
+        self.db = LoopDatabase(lc.mode, self.cdvs_params, cfg.database_params(), model=self.model) if lc.enabled else None
         self.graph = PoseGraphBuilder(cfg.graph)
         self.rng = np.random.default_rng(cfg.seed)
         self.timestamps: list[float] = []
@@ -150,6 +150,7 @@ class Pipeline:
         self._acc_cov = np.zeros((3, 3))
         self._since_kf = 0
         self._new_loops = 0
+        self._last_image = None
         self.last_result = None
 
     # ------------------------------------------------------------------ per frame
@@ -191,14 +192,9 @@ class Pipeline:
         t_loops = t_graph = 0.0
         found: list[LoopRecord] = []
         if keyframe:
-            t0 = time.perf_counter()
-            self._add_keyframe(index)
-            if self.db is not None and image is not None:
-                found = self._detect_loops(index, image)
-            t_loops = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            self._maybe_optimize()
-            t_graph = time.perf_counter() - t0
+            t_loops, t_graph, found = self._keyframe_work(index, image)
+        else:
+            self._last_image = image   # kept (one frame) so that finish() can make the last frame a keyframe
         pose_slam = self.slam_pose(index)
         timings = {"decode": decode_seconds, "vo": t_vo, "loops": t_loops, "graph": t_graph}
         t0 = time.perf_counter()
@@ -209,6 +205,16 @@ class Pipeline:
         for k, v in timings.items():
             self.timings[k].append(v)
         return FrameOutput(index, float(timestamp), est, pose_vo, pose_slam, keyframe, found, timings)
+
+    def _keyframe_work(self, index: int, image: np.ndarray | None) -> tuple[float, float, list[LoopRecord]]:
+        t0 = time.perf_counter()
+        self._add_keyframe(index)
+        found = self._detect_loops(index, image) if self.db is not None and image is not None else []
+        t_loops = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self._maybe_optimize()
+        self._last_image = None
+        return t_loops, time.perf_counter() - t0, found
 
     def _add_keyframe(self, index: int) -> None:
         if self.keyframes:
@@ -272,6 +278,14 @@ class Pipeline:
 
     def finish(self) -> PipelineResult:
         """Final optimisation over all keyframes and loops; the result of the run."""
+        last = len(self.timestamps) - 1
+        if last > 0 and self.keyframes[-1] != last:
+            # the end of the run is a keyframe too: on a closed path it is where the closing loop is found
+            _, _, found = self._keyframe_work(last, self._last_image)
+            if self.recorder is not None:
+                for l in found:
+                    if l.accepted:
+                        self.recorder.log_text(f"loop {l.query_frame} -> {l.match_frame} (end of run)")
         t0 = time.perf_counter()
         if len(self.keyframes) > 1:
             self._maybe_optimize(force=True)
