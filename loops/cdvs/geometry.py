@@ -67,8 +67,9 @@ def distrat_inliers(xa: np.ndarray, xb: np.ndarray, chi2_threshold: float) -> np
     if nu == 0:
         return np.zeros(0, dtype=np.int64)
     u /= nu
+    # matrix-vector products via einsum: no BLAS call, so no thread pool spin-up on a busy machine
     for _ in range(4):
-        v = g @ u
+        v = np.einsum("ij,j->i", g, u)
         nv = np.linalg.norm(v)
         if nv == 0:
             return np.zeros(0, dtype=np.int64)
@@ -77,7 +78,7 @@ def distrat_inliers(xa: np.ndarray, xb: np.ndarray, chi2_threshold: float) -> np
         u = v
         if done:
             break
-    lam = np.linalg.norm(g @ u)
+    lam = np.linalg.norm(np.einsum("ij,j->i", g, u))
     n_in = min(int(lam / dmax) + 1, k)
     if u.sum() < 0:
         u = -u
@@ -86,6 +87,8 @@ def distrat_inliers(xa: np.ndarray, xb: np.ndarray, chi2_threshold: float) -> np
 
 def _fit_similarity(p: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[complex, complex]:
     pc, qc = p[:, 0] + 1j * p[:, 1], q[:, 0] + 1j * q[:, 1]
+    if w.sum() <= 0:
+        w = np.ones(len(w))
     sw = w.sum()
     pm, qm = np.dot(w, pc) / sw, np.dot(w, qc) / sw
     den = np.dot(w, np.abs(pc - pm) ** 2)

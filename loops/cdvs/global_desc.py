@@ -41,7 +41,7 @@ def cluster_signatures(desc: np.ndarray, trained: TrainedParams) -> tuple[np.nda
     x = np.unpackbits(desc, axis=1).astype(np.float32)
     sums = np.add.reduceat(x[rows[order]], starts, axis=0)          # (n_present, 256) bit sums per cluster
     resid = sums - counts[present, None] * trained.cluster_mean[present]   # summed residuals
-    y = resid @ trained.projection                                   # (n_present, 32)
+    y = cv2.gemm(resid.astype(np.float32), trained.projection, 1.0, None, 0.0)   # (n_present, 32), OpenCV threads
     weights = (np.uint32(1) << np.arange(GLOBAL_BITS, dtype=np.uint32))
     bits[present] = ((y > 0).astype(np.uint32) * weights).sum(axis=1, dtype=np.uint64).astype(np.uint32)
     return counts, bits

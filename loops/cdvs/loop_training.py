@@ -31,6 +31,29 @@ class PairScores:
     overlap: np.ndarray                        # (P,) J from the poses given
     local: dict[int, np.ndarray] = field(default_factory=dict)
     global_: dict[int, np.ndarray] = field(default_factory=dict)
+    usable: np.ndarray | None = None           # (P,) pairs whose label the poses can be trusted for
+
+    def save(self, path) -> None:
+        from odometry.atomic_io import atomic_path
+
+        arrays = {"pairs": self.pairs, "overlap": self.overlap}
+        arrays.update({f"local_{m}": v for m, v in self.local.items()})
+        arrays.update({f"global_{m}": v for m, v in self.global_.items()})
+        if self.usable is not None:
+            arrays["usable"] = self.usable
+        with atomic_path(path, suffix=".npz") as tmp:
+            np.savez_compressed(tmp, **arrays)
+
+    @classmethod
+    def load(cls, path) -> "PairScores":
+        with np.load(path) as z:
+            out = cls(z["pairs"], z["overlap"], usable=z["usable"] if "usable" in z.files else None)
+            for k in z.files:
+                if k.startswith("local_"):
+                    out.local[int(k[6:])] = z[k]
+                elif k.startswith("global_"):
+                    out.global_[int(k[7:])] = z[k]
+        return out
 
 
 def encode_all(images: Iterable[np.ndarray], modes=MODES, params: dict[int, CdvsParams] | None = None,
@@ -61,9 +84,14 @@ def select_pairs(n: int, overlap: np.ndarray, global_rank: dict[int, np.ndarray]
     return np.array(sorted(pairs), dtype=np.int64).reshape(-1, 2)
 
 
+def floor_params(modes=MODES) -> dict[int, CdvsParams]:
+    """The downward-camera preset of every mode."""
+    return {m: CdvsParams.floor(m) for m in modes}
+
+
 def score_sequence(descs: dict[int, list], camera: CameraModel, poses: np.ndarray, exclude_recent: int = 5,
                    shortlist: int = 5, n_random: int = 5, seed: int = 0,
-                   trained: TrainedParams | None = None) -> PairScores:
+                   trained: TrainedParams | None = None, params: dict[int, CdvsParams] | None = None) -> PairScores:
     """Match the selected keyframe pairs in every mode. `poses` (N, 3) are the keyframes' planar poses."""
     trained = trained or load_trained()
     modes = sorted(descs)
@@ -82,7 +110,7 @@ def score_sequence(descs: dict[int, list], camera: CameraModel, poses: np.ndarra
     pairs = select_pairs(n, J, {q: sorted(v) for q, v in ranks.items()}, exclude_recent, n_random, rng)
     out = PairScores(pairs, J[pairs[:, 0], pairs[:, 1]] if len(pairs) else np.zeros(0))
     for m in modes:
-        p = CdvsParams.for_mode(m).matching
+        p = (params[m] if params else CdvsParams.for_mode(m)).matching
         res = [match(descs[m][a], descs[m][b], p, trained) for a, b in pairs]
         out.local[m] = np.array([r.local_score for r in res])
         out.global_[m] = np.array([r.global_score for r in res])
@@ -93,11 +121,29 @@ def fit_loop_model(scored: list[PairScores], r: float = 0.33, provenance: dict |
     """P(J >= r | local score) and thresholds per mode from the scored pairs of one or more sequences."""
     modes = sorted(scored[0].local)
     model = LoopModel(overlap_threshold=r, provenance=provenance or {})
+    keep = np.concatenate([ps.usable if ps.usable is not None else np.ones(len(ps.pairs), bool) for ps in scored])
     for m in modes:
-        s = np.concatenate([ps.local[m] for ps in scored])
-        y = np.concatenate([ps.overlap for ps in scored]) >= r
+        s = np.concatenate([ps.local[m] for ps in scored])[keep]
+        y = (np.concatenate([ps.overlap for ps in scored]) >= r)[keep]
         model.curves[m] = fit_curve(m, s, y)
     return model
+
+
+def trustworthy_pairs(pairs: np.ndarray, relative, footprint_radius: float, max_sigma: float = 0.02,
+                      n_sigma: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
+    """Which pair labels odometry can be trusted for (seed 001 §III-C: odometry is dependable over short range).
+
+    `relative(i, j) -> (motion (3,), covariance (3, 3))` (e.g. FusedTrajectory.relative). A pair is usable when the
+    relative position is known to `max_sigma` metres (its J is reliable), or when the images are so far apart
+    that even an n-sigma error cannot make the footprints overlap (certainly J = 0). Returns (usable, sigma)."""
+    usable = np.zeros(len(pairs), dtype=bool)
+    sigma = np.zeros(len(pairs))
+    for k, (a, b) in enumerate(pairs):
+        d, cov = relative(int(b), int(a))
+        sig = float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)))
+        sigma[k] = sig
+        usable[k] = sig <= max_sigma or np.hypot(d[0], d[1]) - n_sigma * sig > 2.0 * footprint_radius
+    return usable, sigma
 
 
 def precision_recall(scores: np.ndarray, overlap: np.ndarray, threshold: float, r: float = 0.33) -> tuple[float, float, int]:

@@ -29,25 +29,17 @@ class MatchResult:
     inlier_weights: np.ndarray  # (K,)
 
 
-def _signed(local: np.ndarray, n_bytes: int) -> np.ndarray:
-    return np.unpackbits(local[:, :n_bytes], axis=1).astype(np.float32) * 2.0 - 1.0
+def _nearest_two(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of a: index of the nearest row of b, its Hamming distance and the second-nearest distance.
+    OpenCV's SIMD Hamming (no BLAS: a GEMM would spin up OpenBLAS threads on a busy machine)."""
+    dist, idx = cv2.batchDistance(a, b, cv2.CV_32S, normType=cv2.NORM_HAMMING, K=2)
+    dist = dist.astype(np.float64)
+    return idx[:, 0].astype(np.int64), dist[:, 0], dist[:, 1]
 
 
-def _best_two(hd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per row: argmin, min and second min of a distance matrix."""
-    rows = np.arange(hd.shape[0])
-    j = hd.argmin(axis=1)
-    d1 = hd[rows, j]
-    saved = d1.copy()
-    hd[rows, j] = np.inf
-    d2 = hd.min(axis=1) if hd.shape[1] > 1 else np.full(len(rows), np.inf)
-    hd[rows, j] = saved
-    return j, d1, d2
-
-
-def _one_way(hd: np.ndarray, ratio: float, max_d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    j, d1, d2 = _best_two(hd)
-    ok = (d1 <= ratio * d2) & (d1 <= max_d) & (d2 > 0)
+def _one_way(j: np.ndarray, d1: np.ndarray, d2: np.ndarray, ratio: float,
+             max_d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ok = (d1 <= ratio * d2) & (d1 <= max_d) & (d2 > 0) & (j >= 0)
     i = np.flatnonzero(ok)
     w = np.cos(0.5 * np.pi * np.sqrt(d1[i] / d2[i]))
     # keep, for each matched column, only its best-weighted row
@@ -63,12 +55,11 @@ def local_matches(a: Descriptor, b: Descriptor, p: MatchParams) -> tuple[np.ndar
         e = np.zeros(0, dtype=np.int64)
         return e, e, np.zeros(0)
     n_bytes = min(a.local.shape[1], b.local.shape[1])   # priority-ordered bits: compare the common prefix
-    n_bits = 8 * n_bytes
-    corr = cv2.gemm(_signed(a.local, n_bytes), _signed(b.local, n_bytes), 1.0, None, 0.0, flags=cv2.GEMM_2_T)
-    hd = (n_bits - corr) * 0.5
-    max_d = p.max_distance_frac * n_bits
-    i1, j1, w1 = _one_way(hd, p.ratio, max_d)
-    j2, i2, w2 = _one_way(np.ascontiguousarray(hd.T), p.ratio, max_d)
+    la = np.ascontiguousarray(a.local[:, :n_bytes])
+    lb = np.ascontiguousarray(b.local[:, :n_bytes])
+    max_d = p.max_distance_frac * 8 * n_bytes
+    i1, j1, w1 = _one_way(*_nearest_two(la, lb), p.ratio, max_d)
+    j2, i2, w2 = _one_way(*_nearest_two(lb, la), p.ratio, max_d)
     nb = b.n_local
     k1, k2 = i1 * nb + j1, i2 * nb + j2
     both, x1, x2 = np.intersect1d(k1, k2, return_indices=True)
@@ -94,7 +85,7 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     g = global_score(a.global_visited, a.global_bits, b.global_visited, b.global_bits, trained.global_weights)
     ia, ib, w = local_matches(a, b, p)
     empty = np.zeros((0, 2), np.float32)
-    if len(w) < p.min_matches:
+    if len(w) < p.min_matches or w.sum() <= 0:   # (one-way weights are scaled to 0 when no match is two-way)
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     xa, xb = a.xy[ia].astype(np.float64), b.xy[ib].astype(np.float64)
     keep = distrat_inliers(xa, xb, p.distrat_chi2)

@@ -53,7 +53,7 @@ def run(a: argparse.Namespace) -> int:
     downward = seq.camera is not None and seq.camera.camera_height is not None
     geometry = {"floor": GeometryModel.SIMILARITY, "general": GeometryModel.AFFINE,
                 "auto": GeometryModel.SIMILARITY if downward else GeometryModel.AFFINE}[a.geometry]
-    params = CdvsParams.for_mode(a.mode)
+    params = CdvsParams.floor(a.mode) if downward else CdvsParams.for_mode(a.mode)
     params = replace(params, matching=replace(params.matching, geometry=geometry))
     dbp = DatabaseParams(shortlist=a.shortlist, exclude_recent=a.exclude_recent, confirmations=a.confirmations)
     indices = list(range(0, len(seq), a.every))

@@ -22,6 +22,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="do not pair keyframes closer than this many keyframes (default 5)")
     p.add_argument("--shortlist", type=int, default=5, help="global candidates per query, as at run time")
     p.add_argument("--random", type=int, default=5, help="random earlier keyframes per query (negatives)")
+    p.add_argument("--max-sigma", type=float, default=0.02,
+                   help="use a pair's label only if the fused relative position is known to this many metres "
+                        "(or the images are certainly apart); default 0.02")
+    p.add_argument("--cache", help="directory to keep per-sequence pair scores (re-fits skip the matching)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-plot", action="store_true")
     p.add_argument("--quiet", action="store_true")
@@ -37,8 +41,8 @@ def _parse_modes(text: str) -> tuple[int, ...]:
     return modes
 
 
-def fused_poses(seq):
-    """Planar poses at the frame times from the wheel/gyro fusion (odometry.fusion)."""
+def fused_trajectory(seq):
+    """The wheel/gyro fusion (odometry.fusion) at the frame times."""
     from odometry.fusion import fuse_wheel_gyro
 
     if seq.odometry is None:
@@ -47,17 +51,19 @@ def fused_poses(seq):
     fused = fuse_wheel_gyro(seq.odometry.timestamps, seq.odometry.v, seq.odometry.omega,
                             None if imu is None else imu.timestamps, None if imu is None else imu.gyro_z,
                             seq.timestamps)
-    return fused.poses
+    return fused
 
 
 def run(a: argparse.Namespace) -> int:
     import sys
     import time
+    import zlib
     from pathlib import Path
 
     import numpy as np
 
-    from loops.cdvs.loop_training import encode_all, fit_loop_model, score_sequence
+    from loops.cdvs.loop_training import (PairScores, encode_all, fit_loop_model, floor_params, score_sequence,
+                                          trustworthy_pairs)
     from loops.cdvs.plots import plot_loop_model
     from loops.cdvs.trained import load_trained
     from vslam.io import open_sequence
@@ -75,24 +81,41 @@ def run(a: argparse.Namespace) -> int:
         cam = seq.require_camera() if hasattr(seq, "require_camera") else seq.camera
         if cam is None or cam.camera_height is None:
             raise ValueError(f"{path}: camera.yaml has no camera_height: J needs a downward-facing camera")
-        poses = fused_poses(seq)
+        fused = fused_trajectory(seq)
         idx = np.arange(0, len(seq), a.every)
-        images = (seq.image(int(i), gray=True) for i in idx)
-        descs = encode_all(images, modes, trained=trained)
-        ps = score_sequence(descs, cam, poses[idx], exclude_recent=a.exclude_recent, shortlist=a.shortlist,
-                            n_random=a.random, seed=a.seed, trained=trained)
+        key = f"{Path(path).resolve().name}-{zlib.crc32(str(Path(path).resolve()).encode()):08x}-" \
+              f"{trained.params_id:04x}-e{a.every}-x{a.exclude_recent}-" \
+              f"s{a.shortlist}-r{a.random}-{a.seed}-{''.join(map(str, modes))}.npz"
+        cached = Path(a.cache) / key if a.cache else None
+        if cached is not None and cached.is_file():
+            ps = PairScores.load(cached)
+        else:
+            images = (seq.image(int(i), gray=True) for i in idx)
+            params = floor_params(modes)
+            descs = encode_all(images, modes, params, trained=trained)
+            ps = score_sequence(descs, cam, fused.poses[idx], exclude_recent=a.exclude_recent,
+                                shortlist=a.shortlist, n_random=a.random, seed=a.seed, trained=trained,
+                                params=params)
+            if cached is not None:
+                ps.save(cached)
+        rmax = float(np.max(np.linalg.norm(cam.footprint(), axis=1)))
+        ps.usable, _ = trustworthy_pairs(ps.pairs, lambda i, j: fused.relative(int(idx[i]), int(idx[j])), rmax,
+                                         a.max_sigma)
         scored.append(ps)
-        n_pos = int(np.sum(ps.overlap >= a.overlap))
+        loop = ps.overlap >= a.overlap
         sources.append({"sequence": str(path), "keyframes": int(len(idx)), "pairs": int(len(ps.pairs)),
-                        "loop_pairs": n_pos})
+                        "loop_pairs": int(np.sum(loop & ps.usable)), "pairs_used": int(ps.usable.sum())})
         if not a.quiet:
-            print(f"{path}: {len(idx)} keyframes, {len(ps.pairs)} pairs matched ({n_pos} loops), "
-                  f"{time.perf_counter() - t0:.0f} s", file=sys.stderr)
+            print(f"{path}: {len(idx)} keyframes, {len(ps.pairs)} pairs matched, {int(ps.usable.sum())} with a "
+                  f"trustworthy label ({int(np.sum(loop & ps.usable))} loops), {time.perf_counter() - t0:.0f} s",
+                  file=sys.stderr)
     provenance = {"command": "vslam train-loops " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["train-loops"]
                   else "vslam train-loops", "sequences": sources, "overlap_threshold": a.overlap,
                   "relative_motion": "odometry.fusion.fuse_wheel_gyro (wheel odometry + gyro)",
                   "every": a.every, "exclude_recent": a.exclude_recent, "shortlist": a.shortlist,
-                  "random": a.random, "seed": a.seed, "descriptor_params_id": trained.params_id}
+                  "random": a.random, "seed": a.seed, "descriptor_params_id": trained.params_id,
+                  "max_sigma": a.max_sigma,
+                  "descriptor_preset": "CdvsParams.floor"}
     model = fit_loop_model(scored, a.overlap, provenance)
     out = Path(a.out)
     model.save(out)
