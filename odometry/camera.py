@@ -171,8 +171,13 @@ class CameraModel:
         xn = np.asarray(xn, dtype=np.float64).reshape(-1, 2)
         heights = np.asarray(heights, dtype=np.float64).reshape(-1)
         tilts = np.asarray(tilts, dtype=np.float64).reshape(-1, 2)
-        rots = np.stack([tilt_matrix(r, p) for r, p in tilts])                     # (K, 3, 3)
-        d = np.einsum("kij,nj->kni", rots, np.column_stack([xn, np.ones(len(xn))]))  # (K, N, 3)
+        cr, sr = np.cos(tilts[:, 0]), np.sin(tilts[:, 0])
+        cp, sp = np.cos(tilts[:, 1]), np.sin(tilts[:, 1])
+        z = np.zeros_like(cr)
+        # tilt_matrix(roll, pitch) = Ry(pitch) Rx(roll), for all hypotheses at once
+        rots = np.stack([np.stack([cp, sp * sr, sp * cr], -1), np.stack([z, cr, -sr], -1),
+                         np.stack([-sp, cp * sr, cp * cr], -1)], -2)                  # (K, 3, 3)
+        d = np.column_stack([xn, np.ones(len(xn))]) @ np.swapaxes(rots, 1, 2)        # (K, N, 3)
         if np.any(d[..., 2] <= 1e-9):
             raise ValueError("a viewing ray does not meet the floor (tilt too large)")
         cam = d[..., :2] * (heights[:, None, None] / d[..., 2:3])

@@ -29,11 +29,13 @@ import numpy as np
 
 from odometry.camera import CameraModel
 from odometry.pose_cov import between_with_covariance, compose_with_covariance
-from odometry.poses import between, compose, inverse
+from odometry.poses import compose
 from odometry.rigid import RigidFit, ransac_rigid_2d
-from odometry.tracking import BadImage, coarse_shift, contrast, detect_corners, normalize, to_gray, track_lk
+from odometry.tilt_refine import refine_planar_tilt
+from odometry.tracking import (BadImage, coarse_shift, contrast, detect_corners, highpass, normalize, normalize_local,
+                               to_gray, track_lk)
 
-__all__ = ["VOConfig", "VOEstimate", "VOStatus", "VOTrajectory", "Reference", "VisualOdometry",
+__all__ = ["Photometric", "Reference", "VOConfig", "VOEstimate", "VOStatus", "VOTrajectory", "VisualOdometry",
            "run_visual_odometry"]
 
 
@@ -46,6 +48,15 @@ class VOStatus(str, Enum):
     LOST = "lost"          # vision failed and no fallback: constant-velocity guess with a large covariance
 
 
+class Photometric(str, Enum):
+    """How frames are normalised before LK (brightness constancy against lighting changes and vignetting)."""
+
+    NONE = "none"
+    GLOBAL = "global"       # gain and offset of the whole frame
+    HIGHPASS = "highpass"   # minus the local box mean: removes smooth light fields (default; 0.3 ms)
+    LOCAL = "local"         # local mean and contrast: the most invariant, ~10x the cost of HIGHPASS
+
+
 class Reference(str, Enum):
     """What the current frame was matched against."""
 
@@ -56,7 +67,7 @@ class Reference(str, Enum):
 
 @dataclass(frozen=True)
 class VOConfig:
-    """Every tunable of the visual odometry (presets: `default`, `fast`, `accurate`).
+    """Every tunable of the visual odometry (presets: `default`, `fast`).
 
     Front end: corners (Shi-Tomasi) are detected at keyframes only, spread over `grid`; LK tracks them in every
     frame from the motion prediction. Robust fit: thresholds are in pixels and converted to metres with the
@@ -64,12 +75,13 @@ class VOConfig:
     `keyframe_min_fraction` of its corners remain inliers, or the rotation since it exceeds
     `keyframe_max_rotation` (LK windows do not rotate).
 
-    Covariance: the fit's residual-based covariance (never below `pixel_sigma`, times `covariance_scale`) plus
-    what the planar model cannot see: the robot pitches and rolls (`tilt_sigma`, rad) and bounces
-    (`height_sigma`, m), which shifts the whole image like a translation of camera_height * tilt. These errors
-    are slow (correlation time `wobble_time`, s), so between two frames dt apart only a fraction
-    2 (1 - exp(-dt / wobble_time)) of their variance appears; `tilt_rotation_coupling` is the heading error per
-    radian of tilt (perspective of the tilted view). Fallback covariances are multiplied by `fallback_inflation`.
+    Covariance: sigma^2 (J^T J)^-1 of the fit (residual-based, sigma never below `pixel_sigma`, times
+    `covariance_scale`). With `refine_tilt` the robot's pitch, roll (prior `tilt_sigma`, rad) and bounce (prior
+    `height_sigma`, m) are estimated with the motion and marginalised into it. Without it, their effect is added
+    as a model term: a tilt shifts the whole view like a translation of camera_height * tilt, slowly
+    (correlation time `wobble_time`, s), so between frames dt apart a fraction 2 (1 - exp(-dt / wobble_time)) of
+    that variance appears; `tilt_rotation_coupling` is the heading error per radian of tilt. Fallback
+    covariances are multiplied by `fallback_inflation`.
     """
 
     max_features: int = 200
@@ -78,12 +90,13 @@ class VOConfig:
     min_distance: float = 14.0
     half_resolution_detection: bool = True
     border: int = 16
-    lk_window: int = 21
-    lk_levels: int = 3
+    lk_window: int = 15
+    lk_levels: int = 0
     lk_iterations: int = 20
     lk_epsilon: float = 0.02
     lk_min_eig: float = 1e-3
-    normalize_lighting: bool = True
+    photometric: Photometric = Photometric.HIGHPASS
+    photometric_radius: int = 8
     min_contrast: float = 2.0
     min_features: int = 25
     ransac_threshold_px: float = 1.5
@@ -96,6 +109,7 @@ class VOConfig:
     keyframe_max_rotation: float = math.radians(12.0)
     pixel_sigma: float = 0.05
     covariance_scale: float = 1.0
+    refine_tilt: bool = True
     tilt_sigma: float = 0.003
     height_sigma: float = 0.002
     wobble_time: float = 2.0
@@ -105,13 +119,15 @@ class VOConfig:
     lost_sigma_theta: float = 0.1
     max_failures_before_reset: int = 2
     coarse_retry: bool = True
+    retry_levels: int = 3
     coarse_min_response: float = 0.05
     seed: int = 0
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "photometric", Photometric(self.photometric))
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, bool) or f.name == "grid":
+            if isinstance(v, (bool, Enum)) or f.name == "grid":
                 continue
             if not math.isfinite(v) or v < 0:
                 raise ValueError(f"VOConfig.{f.name} must be a finite number >= 0, got {v!r}")
@@ -128,18 +144,13 @@ class VOConfig:
 
     @classmethod
     def fast(cls) -> "VOConfig":
-        """Fewer corners and a smaller LK window: for slow robots or small images."""
-        return cls(max_features=120, lk_window=15, lk_levels=2, keyframe_min_inliers=40)
-
-    @classmethod
-    def accurate(cls) -> "VOConfig":
-        """More corners and a full-resolution detector: lower drift, about twice the cost."""
-        return cls(max_features=400, half_resolution_detection=False, min_distance=10.0, lk_iterations=30,
-                   lk_epsilon=0.01, keyframe_min_inliers=80)
+        """Fewer corners and a plain rigid fit (no tilt refinement). Measured on the natural floors: about 1.8x
+        the frame rate of `default`, drift 0.16 % instead of 0.11 %."""
+        return cls(max_features=120, refine_tilt=False, keyframe_min_inliers=40, ransac_iterations=100)
 
     @classmethod
     def preset(cls, name: str) -> "VOConfig":
-        presets = {"default": cls.default, "fast": cls.fast, "accurate": cls.accurate}
+        presets = {"default": cls.default, "fast": cls.fast}
         if name not in presets:
             raise ValueError(f"unknown VO preset {name!r}; choose one of {', '.join(presets)}")
         return presets[name]()
@@ -205,12 +216,22 @@ class VOEstimate:
         return self.matches[self.inliers]
 
 
+@dataclass(frozen=True)
+class _Images:
+    """A frame prepared for LK: `fine` is photometrically normalised for precise single-level tracking; `coarse`
+    keeps the low frequencies (gain/offset normalised only) that the coarse levels of a deep pyramid need."""
+
+    fine: np.ndarray
+    coarse: np.ndarray
+
+
 @dataclass
 class _Keyframe:
     index: int
     timestamp: float
-    gray: np.ndarray     # normalised grey image (LK template)
+    gray: _Images        # LK templates
     pts: np.ndarray      # (N, 2) float32 corner pixels
+    xn: np.ndarray       # (N, 2) their undistorted normalised coordinates
     floor: np.ndarray    # (N, 2) their floor points in the keyframe's base frame
 
 
@@ -239,10 +260,11 @@ class VisualOdometry:
         self._t_kp = np.zeros(3)                  # pose of the previous frame in the keyframe frame
         self._c_kp = np.zeros((3, 3))             # its full covariance
         self._c_kp_fit: np.ndarray | None = None  # its fit-only covariance when vision measured it from this keyframe
-        self._prev_gray: np.ndarray | None = None
+        self._prev_gray: _Images | None = None
         self._prev_px: np.ndarray | None = None   # tracked keyframe corners in the previous frame (inliers)
         self._failures = 0                        # consecutive frames vision could not measure
         self._fit_seconds = 0.0
+        self._predicted = False
 
     # ------------------------------------------------------------------ public state
     @property
@@ -280,8 +302,8 @@ class VisualOdometry:
             reason = ""
         except BadImage as exc:
             gray, reason = None, str(exc)
-        if self.config.normalize_lighting and gray is not None:
-            gray = normalize(gray)
+        if gray is not None:
+            gray = self._prepare(gray)
 
         if index == 0:
             est = VOEstimate(index=0, timestamp=timestamp, delta=np.zeros(3), covariance=np.zeros((3, 3)),
@@ -293,6 +315,7 @@ class VisualOdometry:
             return est
 
         pred, pred_cov = self._prediction(dt, fallback)
+        self._predicted = fallback is not None or self._velocity is not None
         est = None
         if gray is not None and self._kf is not None:
             est = self._match_keyframe(gray, index, timestamp, dt, pred)
@@ -309,47 +332,63 @@ class VisualOdometry:
         return est
 
     # ------------------------------------------------------------------ pieces
+    def _prepare(self, gray: np.ndarray) -> _Images:
+        mode, radius = self.config.photometric, self.config.photometric_radius
+        coarse = normalize(gray)
+        if mode == Photometric.LOCAL:
+            return _Images(normalize_local(gray, radius), coarse)
+        if mode == Photometric.HIGHPASS:
+            return _Images(highpass(gray, radius), coarse)
+        return _Images(coarse if mode == Photometric.GLOBAL else gray, coarse)
+
     def _prediction(self, dt: float, fallback) -> tuple[np.ndarray, np.ndarray]:
         c = self.config
         if fallback is not None:
             return fallback
-        if self._velocity is not None:
-            pred = self._velocity * dt
-        else:
-            pred = np.zeros(3)
+        # without any motion source the guess is "no motion", flagged by self._predicted = False
+        pred = self._velocity * dt if self._velocity is not None else np.zeros(3)
         return pred, np.diag([c.lost_sigma_xy ** 2, c.lost_sigma_xy ** 2, c.lost_sigma_theta ** 2])
 
-    def _start_keyframe(self, gray: np.ndarray, index: int, timestamp: float,
+    def _start_keyframe(self, gray: _Images, index: int, timestamp: float,
                         reason_out: VOEstimate | None = None) -> bool:
         c = self.config
-        pts = detect_corners(gray, c.max_features, c.grid, c.quality, c.min_distance, c.border,
+        pts = detect_corners(gray.fine, c.max_features, c.grid, c.quality, c.min_distance, c.border,
                              c.half_resolution_detection)
         if len(pts) < c.min_features:
             if reason_out is not None and not reason_out.reason:
                 reason_out.reason = f"too few corners for a keyframe ({len(pts)} < {c.min_features})"
             return False
-        self._kf = _Keyframe(index=index, timestamp=timestamp, gray=gray, pts=pts,
-                             floor=self.camera.pixel_to_floor(pts))
+        xn = self.camera.normalize(pts)
+        self._kf = _Keyframe(index=index, timestamp=timestamp, gray=gray, pts=pts, xn=xn,
+                             floor=self.camera.rays_to_floor(xn))
         self._t_kp = np.zeros(3)
         self._c_kp = np.zeros((3, 3))
         self._c_kp_fit = np.zeros((3, 3))
         self._prev_px = pts
         return True
 
-    def _fit(self, src_floor: np.ndarray, dst_floor: np.ndarray) -> RigidFit | None:
+    def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray,
+             ref_floor: np.ndarray) -> RigidFit | None:
+        """RANSAC + Kabsch on floor points (cur -> ref), then the tilt-aware refinement on the inliers."""
         c = self.config
         t0 = time.perf_counter()
-        fit = ransac_rigid_2d(src_floor, dst_floor, c.ransac_threshold_px * self._m_per_px, rng=self._rng,
+        fit = ransac_rigid_2d(cur_floor, ref_floor, c.ransac_threshold_px * self._m_per_px, rng=self._rng,
                               max_iterations=c.ransac_iterations, confidence=c.ransac_confidence,
                               sigma_floor=c.pixel_sigma * self._m_per_px)
+        if fit is not None and fit.n_inliers >= c.min_inliers and fit.inlier_ratio >= c.min_inlier_ratio \
+                and c.refine_tilt:
+            tf = refine_planar_tilt(self.camera, ref_xn[fit.inliers], cur_xn[fit.inliers], fit.delta,
+                                    c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px)
+            if tf is not None:
+                fit.delta, fit.covariance, fit.rms, fit.sigma = tf.delta, tf.covariance, tf.rms, tf.sigma
         self._fit_seconds += time.perf_counter() - t0
         if fit is None or fit.n_inliers < c.min_inliers or fit.inlier_ratio < c.min_inlier_ratio:
             return None
         fit.covariance = fit.covariance * c.covariance_scale
         return fit
 
-    def _track(self, ref_gray: np.ndarray, ref_px: np.ndarray, ref_floor: np.ndarray, gray: np.ndarray,
-               t_ref_cur: np.ndarray, shift: np.ndarray | None = None
+    def _track(self, ref_gray: _Images, ref_px: np.ndarray, ref_xn: np.ndarray, ref_floor: np.ndarray,
+               gray: _Images, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None
                ) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
         """LK from a reference frame, started at the positions predicted by the motion t_ref_cur (or by a global
         image `shift` when given); then the robust fit."""
@@ -362,23 +401,38 @@ class VisualOdometry:
         w, h = self.camera.size
         m = 2 * c.border
         visible = (guess[:, 0] > -m) & (guess[:, 0] < w + m) & (guess[:, 1] > -m) & (guess[:, 1] < h + m)
-        ref_px, ref_floor, guess = ref_px[visible], ref_floor[visible], guess[visible]
-        cur_px, ok = track_lk(ref_gray, gray, ref_px, guess, c.lk_window, c.lk_levels, c.lk_iterations,
+        ref_px, ref_xn, ref_floor, guess = ref_px[visible], ref_xn[visible], ref_floor[visible], guess[visible]
+        if levels is not None and levels > c.lk_levels:
+            # a wide capture range first, on images that keep their low frequencies, then the precise pass
+            coarse_px, coarse_ok = track_lk(ref_gray.coarse, gray.coarse, ref_px, guess, c.lk_window, levels,
+                                            c.lk_iterations, c.lk_epsilon, c.lk_min_eig)
+            guess = np.where(coarse_ok[:, None], coarse_px, guess)
+        cur_px, ok = track_lk(ref_gray.fine, gray.fine, ref_px, guess, c.lk_window, c.lk_levels, c.lk_iterations,
                               c.lk_epsilon, c.lk_min_eig)
-        ref_px, ref_floor, cur_px = ref_px[ok], ref_floor[ok], cur_px[ok]
+        ref_px, ref_xn, ref_floor, cur_px = ref_px[ok], ref_xn[ok], ref_floor[ok], cur_px[ok]
         if len(cur_px) < c.min_inliers:
             return None, ref_px, cur_px, np.zeros(len(cur_px), bool)
-        fit = self._fit(self.camera.pixel_to_floor(cur_px), ref_floor)
+        cur_xn = self.camera.normalize(cur_px)
+        fit = self._fit(cur_xn, ref_xn, self.camera.rays_to_floor(cur_xn), ref_floor)
         return fit, ref_px, cur_px, (fit.inliers if fit is not None else np.zeros(len(cur_px), bool))
 
-    def _track_with_retry(self, ref_gray, ref_px, ref_floor, gray, t_ref_cur):
-        """Track from the motion prediction; if that fails, retry once from a phase-correlation shift (the
-        prediction may be missing or wrong: first frames, wheel slip, a dropped frame)."""
-        out = self._track(ref_gray, ref_px, ref_floor, gray, t_ref_cur)
-        if out[0] is None and self.config.coarse_retry:
-            shift, response = coarse_shift(ref_gray, gray)
-            if response > self.config.coarse_min_response:
-                out = self._track(ref_gray, ref_px, ref_floor, gray, t_ref_cur, shift=shift)
+    def _track_with_retry(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur):
+        """Track from the motion prediction; if that fails (or there is none), retry from a phase-correlation shift
+        with a deeper LK pyramid: the prediction may be missing or wrong (first frames, wheel slip, a dropped
+        frame) and the shift ignores rotation."""
+        c = self.config
+        deep = max(c.lk_levels, c.retry_levels)
+        out = (None,) if t_ref_cur is None else self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur)
+        if out[0] is None and t_ref_cur is not None and deep > c.lk_levels:
+            # a poor prediction (slip, failed frames in between): the same start with a wider capture range
+            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep)
+        if out[0] is None and c.coarse_retry:
+            shift, response = coarse_shift(ref_gray.coarse, gray.coarse)
+            if response > c.coarse_min_response:
+                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), shift=shift, levels=deep)
+        if out[0] is None and t_ref_cur is None:
+            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3),
+                              levels=max(c.lk_levels, c.retry_levels))
         return out
 
     def _model_covariance(self, dt: float, motion: np.ndarray) -> np.ndarray:
@@ -391,12 +445,14 @@ class VisualOdometry:
 
     def _match_keyframe(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
         kf = self._kf
-        t_kc_pred = compose(self._t_kp, pred)
-        fit, ref_px, cur_px, inl = self._track_with_retry(kf.gray, kf.pts, kf.floor, gray, t_kc_pred)
+        t_kc_pred = compose(self._t_kp, pred) if self._predicted else None
+        fit, ref_px, cur_px, inl = self._track_with_retry(kf.gray, kf.pts, kf.xn, kf.floor, gray, t_kc_pred)
         if fit is None:
             return None
-        c_kc = fit.covariance + self._model_covariance(timestamp - kf.timestamp, fit.delta)
-        if self._c_kp_fit is not None:
+        tilt = self.config.refine_tilt  # the fit's covariance already covers the wobble
+        c_kc = fit.covariance if tilt else fit.covariance + self._model_covariance(timestamp - kf.timestamp,
+                                                                                    fit.delta)
+        if self._c_kp_fit is not None and not tilt:
             # previous frame measured from the same keyframe: their wobble errors are mostly shared and cancel
             delta, cov = between_with_covariance(self._t_kp, self._c_kp_fit, fit.delta, fit.covariance)
             cov = cov + self._model_covariance(dt, delta)
@@ -417,11 +473,13 @@ class VisualOdometry:
 
     def _match_previous(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
         prev_px = self._prev_px
-        fit, ref_px, cur_px, _ = self._track_with_retry(self._prev_gray, prev_px,
-                                                        self.camera.pixel_to_floor(prev_px), gray, pred)
+        prev_xn = self.camera.normalize(prev_px)
+        fit, ref_px, cur_px, _ = self._track_with_retry(self._prev_gray, prev_px, prev_xn,
+                                                        self.camera.rays_to_floor(prev_xn), gray,
+                                                        pred if self._predicted else None)
         if fit is None:
             return None
-        cov = fit.covariance + self._model_covariance(dt, fit.delta)
+        cov = fit.covariance if self.config.refine_tilt else fit.covariance + self._model_covariance(dt, fit.delta)
         est = self._estimate(index, timestamp, fit.delta, cov, Reference.PREVIOUS, fit, ref_px, cur_px)
         # the keyframe could not be tracked: this frame replaces it
         if self._start_keyframe(gray, index, timestamp):

@@ -7,7 +7,6 @@ import cv2
 import numpy as np
 
 from odometry.camera import CameraModel
-from odometry.poses import transform_points
 
 
 def texture(shared_data, name="gazebo_models_ccby3/robocup09_spl_field__carpet.jpg") -> np.ndarray:
@@ -37,7 +36,11 @@ class FloorRenderer:
         self._base = camera.pixel_to_floor(np.column_stack([u.ravel(), v.ravel()]))
 
     def render(self, pose) -> np.ndarray:
-        w = transform_points(np.asarray(pose, float), self._base)
+        # element-wise rather than a (N, 2) @ (2, 2) matmul: multi-threaded BLAS on a busy machine is very slow
+        x, y, th = (float(v) for v in pose)
+        c, s = np.cos(th), np.sin(th)
+        bx, by = self._base[:, 0], self._base[:, 1]
+        w = np.column_stack([x + c * bx - s * by, y + s * bx + c * by])
         col = (w[:, 0] - self.origin[0]) / self.s
         row = (self.origin[1] - w[:, 1]) / self.s
         shape = (self.camera.height, self.camera.width)

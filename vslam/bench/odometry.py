@@ -38,9 +38,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated floor types (targets are judged on carpet, concrete, asphalt, tiles)")
     p.add_argument("--frames", type=int, default=1000, help="frames per sequence (default 1000)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--preset", default="default", help="VOConfig preset: default, fast, accurate")
+    p.add_argument("--preset", default="default", help="VOConfig preset: default, fast")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a VOConfig field for an ablation, e.g. --set refine_tilt=false (repeatable)")
     p.add_argument("--threads", type=int, default=1,
                    help="OpenCV threads (default 1: the machine is shared; the VO itself is single-threaded)")
+    p.add_argument("--faults", type=float, default=0.03, metavar="P",
+                   help="also run a carpet sequence with this probability of dropped and of corrupt frames "
+                        "(reported separately; 0 to skip)")
     p.add_argument("--data", default=None, help="keep the simulated sequences here and reuse them on later runs")
     p.add_argument("--out", default=None, help="write the results as JSON here")
 
@@ -118,19 +123,22 @@ class _AffineBaseline:
         self.seconds.append(dt)
 
 
-def _simulate(floor: str, trajectory: str, frames: int, seed: int, where: Path) -> Path:
-    from vslam.sim import SimConfig, simulate
+def _simulate(floor: str, trajectory: str, frames: int, seed: int, where: Path, faults: float = 0.0) -> Path:
+    from dataclasses import replace
+
+    from vslam.sim import Effects, SimConfig, simulate
     from vslam.sim.simulate import length_for_frames
 
-    cfg = SimConfig(floor=floor, trajectory=trajectory, seed=seed, max_frames=frames,
+    effects = replace(Effects(), dropped_frames=faults, corrupt_frames=faults)  # blur, lighting etc. stay on
+    cfg = SimConfig(floor=floor, trajectory=trajectory, seed=seed, max_frames=frames, effects=effects,
                     length=length_for_frames(frames, SimConfig.fps, SimConfig.speed))
-    out = where / f"{floor}_{trajectory}_{frames}_s{seed}"
+    out = where / (f"{floor}_{trajectory}_{frames}_s{seed}" + (f"_faults{faults:g}" if faults > 0 else ""))
     if not (out / "frames.csv").is_file():
         simulate(cfg, out, overwrite=True)
     return out
 
 
-def run_sequence(path: Path, preset: str = "default") -> dict:
+def run_sequence(path: Path, preset: str = "default", overrides: dict | None = None) -> dict:
     """VO + both baselines on one sequence directory; returns metrics and timings."""
     from odometry.fusion import fuse_wheel_gyro
     from odometry.poses import between
@@ -145,7 +153,7 @@ def run_sequence(path: Path, preset: str = "default") -> dict:
     fused = fuse_wheel_gyro(seq.odometry.timestamps, seq.odometry.v, seq.odometry.omega, seq.imu.timestamps,
                             seq.imu.gyro_z, seq.timestamps)
     fusion_s = time.perf_counter() - t0
-    cfg = VOConfig.preset(preset)
+    cfg = VOConfig.from_dict(overrides or {}, base=VOConfig.preset(preset))
     base = _AffineBaseline(cam, cfg.ransac_threshold_px * cam.ground_resolution())
     fit_s: list[float] = []
 
@@ -157,6 +165,14 @@ def run_sequence(path: Path, preset: str = "default") -> dict:
                              fallback=lambda i: fused.relative(i - 1, i), on_frame=on_frame)
     vo_s = vo.vo_seconds[1:]
     fit = np.asarray(fit_s[1:])
+    # covariance honesty: NEES of the per-frame motions measured by vision (3 on average when consistent)
+    ok = np.array([s == VOStatus.OK for s in vo.status])
+    ok[0] = False
+    ok &= np.all(np.isfinite(gt), axis=1) & np.roll(np.all(np.isfinite(gt), axis=1), 1)
+    idx = np.flatnonzero(ok)
+    err = vo.deltas[idx] - between(gt[idx - 1], gt[idx])
+    err[:, 2] = (err[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    nees = np.einsum("ni,ni->n", err, np.linalg.solve(vo.covariances[idx], err[:, :, None])[:, :, 0])
     aff = np.asarray(base.seconds[1:])
     counts = {s.value: int(sum(1 for x in vo.status if x == s)) for s in VOStatus}
     return {
@@ -167,6 +183,8 @@ def run_sequence(path: Path, preset: str = "default") -> dict:
         "median_inliers": float(np.median(vo.n_inliers[1:])),
         "median_rms_px": float(np.nanmedian(vo.rms_px[1:])) if np.any(np.isfinite(vo.rms_px[1:])) else float("nan"),
         "decode_ms": float(np.median(vo.image_seconds) * 1e3),
+        "nees_mean": float(np.mean(nees)) if len(nees) else float("nan"),
+        "nees_within_95pct": float(np.mean(nees < 7.815)) if len(nees) else float("nan"),
         "vo": {**drift_metrics(vo.poses, gt), "step_ms": float(np.median(vo_s) * 1e3),
                "fit_ms": float(np.median(fit) * 1e3), "fps": float(1.0 / np.median(vo_s))},
         "fusion": {**drift_metrics(fused.poses, gt), "step_ms": fusion_s / len(seq) * 1e3,
@@ -176,6 +194,87 @@ def run_sequence(path: Path, preset: str = "default") -> dict:
                    "fit_ms": float(np.median(aff) * 1e3),
                    "fps": float(1.0 / np.median(vo_s - fit + aff)), "failures": base.failures},
     }
+
+
+# ---------------------------------------------------------------------------------------------------- front ends
+
+def frontend_comparison(path: Path, pairs: int = 60, seed: int = 0) -> list[dict]:
+    """Time and precision of candidate front ends on consecutive frame pairs of one sequence.
+
+    For each pair: correspondences from the front end, back-projected to the floor, rigid RANSAC fit; reported
+    are the median time per frame (detection on the new frame + matching / tracking), the number of inliers
+    and their RMS residual in pixels (keypoint precision: what drift is made of).
+    """
+    import cv2
+
+    from odometry.fusion import fuse_wheel_gyro
+    from odometry.rigid import ransac_rigid_2d
+    from odometry.tracking import detect_corners, highpass, normalize, track_lk
+    from vslam.io import open_sequence
+
+    seq = open_sequence(path)
+    cam = seq.require_camera()
+    m_px = cam.ground_resolution()
+    rng = np.random.default_rng(seed)
+    frames = [seq.image(i, gray=True) for i in range(min(len(seq), pairs + 1))]
+    orb = cv2.ORB_create(nfeatures=1000)
+    bf = cv2.BFMatcher(cv2.NORM_HAMMING)
+
+    def orb_pairs(a, b, kd_a):
+        kb, db = orb.detectAndCompute(b, None)
+        if kd_a[1] is None or db is None or len(kb) < 2:
+            return np.zeros((0, 2)), np.zeros((0, 2)), (kb, db)
+        good = [p[0] for p in bf.knnMatch(kd_a[1], db, k=2) if len(p) == 2 and p[0].distance < 0.8 * p[1].distance]
+        pa = np.array([kd_a[0][g.queryIdx].pt for g in good]).reshape(-1, 2)
+        pb = np.array([kb[g.trainIdx].pt for g in good]).reshape(-1, 2)
+        return pa, pb, (kb, db)
+
+    fused = fuse_wheel_gyro(seq.odometry.timestamps, seq.odometry.v, seq.odometry.omega, seq.imu.timestamps,
+                            seq.imu.gyro_z, seq.timestamps[:len(frames)])
+
+    def predicted(a_idx, b_idx, pts):  # the VO's own prediction: the fused wheel/gyro motion
+        d = fused.relative(a_idx, b_idx)[0]
+        fl = cam.pixel_to_floor(pts)
+        c, s_ = np.cos(d[2]), np.sin(d[2])
+        return cam.floor_to_pixel((fl - d[:2]) @ np.array([[c, -s_], [s_, c]]))
+
+    rows = []
+    variants = ["ORB 1000 + BF ratio test", "Shi-Tomasi + LK 3 levels (no prediction)",
+                "ours: keyframe corners + LK 1 level from the prediction"]
+    for name in variants:
+        times, inl, rms = [], [], []
+        state = None
+        for k in range(1, len(frames)):
+            a, b = frames[k - 1], frames[k]
+            if name.startswith("ORB"):
+                if state is None:
+                    state = orb.detectAndCompute(a, None)
+                t0 = time.perf_counter()
+                pa, pb, state = orb_pairs(a, b, state)
+                times.append(time.perf_counter() - t0)
+            else:
+                ours = name.startswith("ours")
+                # ours: high-passed frames, single level; the classic pyramid needs the low frequencies
+                ha, hb = (highpass(a), highpass(b)) if ours else (normalize(a), normalize(b))
+                pa = detect_corners(ha, 200, (8, 6), 0.01, 14.0, 16, True)
+                guess = predicted(k - 1, k, pa) if name.startswith("ours") else None
+                levels = 0 if name.startswith("ours") else 3
+                t0 = time.perf_counter()
+                if not name.startswith("ours"):
+                    pa = detect_corners(ha, 200, (8, 6), 0.01, 14.0, 16, True)  # detection on every frame
+                pb, ok = track_lk(ha, hb, pa, guess, 15, levels, 20, 0.02, 1e-3)
+                times.append(time.perf_counter() - t0)
+                pa, pb = pa[ok], pb[ok]
+            if len(pa) < 3:
+                continue
+            fit = ransac_rigid_2d(cam.pixel_to_floor(pb), cam.pixel_to_floor(pa), 1.5 * m_px, rng=rng)
+            if fit is not None:
+                inl.append(fit.n_inliers)
+                rms.append(fit.rms / m_px)
+        rows.append({"front_end": name, "ms_per_frame": float(np.median(times) * 1e3),
+                     "inliers": float(np.median(inl)) if inl else 0.0,
+                     "rms_px": float(np.median(rms)) if rms else float("nan")})
+    return rows
 
 
 # ---------------------------------------------------------------------------------------------------- command
@@ -189,8 +288,14 @@ def run(args: argparse.Namespace) -> int:
 
     from vslam.bench._common import format_table, write_json
 
+    from vslam.cli.cmd_odometry import _overrides
+
     if args.frames < 50:
         raise ValueError("--frames must be at least 50")
+    overrides = _overrides(args.set)
+    from odometry.vo import VOConfig
+
+    VOConfig.from_dict(overrides)  # fail early on a bad override
     floors = [f.strip() for f in args.floors.split(",") if f.strip()]
     frames = args.frames
     if args.quick:
@@ -203,20 +308,26 @@ def run(args: argparse.Namespace) -> int:
     else:
         tmp = tempfile.TemporaryDirectory(prefix="vslam-bench-odometry-")
         where = Path(tmp.name)
-    results = []
+    runs = [(floor, TRAJECTORIES[k % len(TRAJECTORIES)], args.seed + k, 0.0) for k, floor in enumerate(floors)]
+    if args.faults > 0 and not args.quick:
+        runs.append(("carpet", "random", args.seed + len(floors), args.faults))
+    results, paths = [], []
+    front: list[dict] = []
     try:
-        for k, floor in enumerate(floors):
-            traj = TRAJECTORIES[k % len(TRAJECTORIES)]
+        for floor, traj, seed, faults in runs:
             t0 = time.perf_counter()
-            path = _simulate(floor, traj, frames, args.seed + k, where)
+            path = _simulate(floor, traj, frames, seed, where, faults)
             t1 = time.perf_counter()
-            r = run_sequence(path, args.preset)
-            r.update(floor=floor, trajectory=traj, simulate_s=t1 - t0, run_s=time.perf_counter() - t1)
+            r = run_sequence(path, args.preset, overrides)
+            label = floor if faults == 0 else f"{floor} + {faults:.0%} dropped + {faults:.0%} corrupt frames"
+            r.update(floor=label, trajectory=traj, simulate_s=t1 - t0, run_s=time.perf_counter() - t1)
             results.append(r)
-            print(f"{floor:>12} {traj:>9}: VO {r['vo']['segment_drift_pct']:.3f} % "
+            paths.append(path)
+            print(f"{label:>12} {traj:>9}: VO {r['vo']['segment_drift_pct']:.3f} % "
                   f"(end {r['vo']['end_drift_pct']:.3f} %), fusion {r['fusion']['segment_drift_pct']:.3f} %, "
                   f"affine {r['affine']['segment_drift_pct']:.3f} %, VO {r['vo']['fps']:.0f} frames/s, "
                   f"status {r['status']}", flush=True)
+        front = frontend_comparison(paths[0], pairs=30 if args.quick else 100)
     finally:
         if tmp is not None:
             tmp.cleanup()
@@ -240,6 +351,10 @@ def run(args: argparse.Namespace) -> int:
         srows.append([label, med["segment_drift_pct"], med["end_drift_pct"], med["segment_heading_deg_per_m"],
                       med["fps"]])
     decode_ms = float(np.median([r["decode_ms"] for r in results]))
+    print("\nVO covariance honesty (per-frame motions measured by vision; consistent: mean NEES 3, 95 % within "
+          "the chi2(3) 95 % bound):")
+    print(format_table(["floor", "mean NEES", "within 95 % bound"],
+                       [[r["floor"], r["nees_mean"], r["nees_within_95pct"]] for r in results]))
     print()
     print(format_table(headers, rows))
     print()
@@ -252,12 +367,17 @@ def run(args: argparse.Namespace) -> int:
         "better_than_affine": vo["segment_drift_pct"] < af["segment_drift_pct"],
         "vo_fps_ge_100": vo["fps"] >= 100.0,
     }
+    if front:
+        print("\nFront ends on consecutive frames of the first sequence (time: detection/description on the new frame "
+              "+ matching or tracking):")
+        print(format_table(["front end", "ms/frame", "inliers", "inlier RMS px"],
+                           [[f["front_end"], f["ms_per_frame"], f["inliers"], f["rms_px"]] for f in front]))
     print(f"\nimage decode (excluded above): {decode_ms:.2f} ms/frame ({1e3 / decode_ms:.0f} frames/s)")
     print("targets: " + ", ".join(f"{k} {'met' if v else 'NOT met'}" for k, v in checks.items()))
     if args.out:
         write_json(args.out, {"benchmark": "odometry", "quick": bool(args.quick), "frames": frames,
-                              "preset": args.preset, "opencv_threads": max(1, args.threads), "seed": args.seed,
-                              "sequences": results, "summary_natural_median": summary, "decode_ms": decode_ms,
-                              "targets": checks})
+                              "preset": args.preset, "overrides": overrides, "opencv_threads": max(1, args.threads),
+                              "seed": args.seed, "sequences": results, "front_ends": front,
+                              "summary_natural_median": summary, "decode_ms": decode_ms, "targets": checks})
         print(f"wrote {args.out}")
     return 0
