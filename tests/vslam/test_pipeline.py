@@ -155,3 +155,13 @@ def test_cli_errors(tmp_path, capsys, run_dir):
     assert "no calibration" in capsys.readouterr().err
     assert main(["run", str(run_dir / "seq"), "--out", str(tmp_path / "o3"), "--print-config"]) == 0
     assert "loops:" in capsys.readouterr().out
+
+
+def test_incremental_isam2_agrees_with_batch(run_dir):
+    seq = open_sequence(run_dir / "seq")
+    base = replace(PipelineConfig(), recording=replace(PipelineConfig().recording, enabled=False))
+    batch = Pipeline(base).run(seq)
+    inc = Pipeline(replace(base, incremental=True)).run(seq)
+    assert inc.graph_result.solver == "isam2"
+    assert np.abs(inc.poses_slam[:, :2] - batch.poses_slam[:, :2]).max() < 0.005
+    assert [l.inlier for l in inc.loops if l.accepted] == [l.inlier for l in batch.loops if l.accepted]

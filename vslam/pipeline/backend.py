@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from graph.batch import optimize
+from graph.incremental import IncrementalPoseGraph
 from graph.model import PoseGraphData
 from graph.params import GraphParams, InitMethod
 from graph.result import GraphResult
@@ -16,7 +17,9 @@ def _information(cov: np.ndarray) -> np.ndarray:
 
 
 class PoseGraphBuilder:
-    """Planar pose graph over keyframes (node id = frame index)."""
+    """Planar pose graph over keyframes (node id = frame index), solved in batch."""
+
+    incremental = False
 
     def __init__(self, params: GraphParams):
         self.params = params
@@ -65,3 +68,40 @@ class PoseGraphBuilder:
         """Batch solve. warm_start: begin from the current guesses (the previous solution + odometry)."""
         init = InitMethod.GIVEN if warm_start else None
         return optimize(self.data(), self.params, init=init)
+
+
+class IncrementalBuilder:
+    """The same interface over iSAM2 (graph.IncrementalPoseGraph): loops are gated and inserted as they come,
+    and the current estimate is read after each update."""
+
+    incremental = True
+
+    def __init__(self, params: GraphParams):
+        self.graph = IncrementalPoseGraph(2, params)
+        self.n_loops = 0
+
+    def add_node(self, frame: int, guess: np.ndarray) -> None:
+        self.graph.add_node(int(frame), guess)
+
+    def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray) -> None:
+        self.graph.add_odometry(int(i), int(j), delta, cov + np.eye(3) * 1e-12)
+
+    def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray, probability: float | None) -> int:
+        p = None if probability is None or not np.isfinite(probability) else float(probability)
+        self.n_loops += 1
+        return self.graph.add_loop(int(i), int(j), delta, cov + np.eye(3) * 1e-12, probability=p)
+
+    def update(self) -> tuple[np.ndarray, np.ndarray]:
+        """Insert what is pending; (node ids, poses) of the current estimate."""
+        self.graph.update()
+        return self.graph.estimate()
+
+    def loop_inliers(self) -> np.ndarray:
+        return self.graph.loop_inliers()
+
+    def data(self) -> PoseGraphData:
+        return self.graph.to_data()
+
+    def optimize(self, warm_start: bool = False) -> GraphResult:
+        """Final: flush, classify every loop, a few more updates; the GraphResult."""
+        return self.graph.result(classify=True)

@@ -25,7 +25,7 @@ from odometry.fusion import fuse_wheel_gyro
 from odometry.pose_cov import compose_with_covariance
 from odometry.poses import between, compose
 from odometry.vo import VisualOdometry, VOEstimate, VOStatus
-from vslam.pipeline.backend import PoseGraphBuilder
+from vslam.pipeline.backend import IncrementalBuilder, PoseGraphBuilder
 from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import loop_pose
 
@@ -134,7 +134,7 @@ class Pipeline:
         self.model = LoopModel.load(lc.model) if lc.model else _default_model()
         self.cdvs_params = CdvsParams.floor(lc.mode) if lc.floor_preset else CdvsParams.for_mode(lc.mode)
         self.db = LoopDatabase(lc.mode, self.cdvs_params, cfg.database_params(), model=self.model) if lc.enabled else None
-        self.graph = PoseGraphBuilder(cfg.graph)
+        self.graph = IncrementalBuilder(cfg.graph) if cfg.incremental else PoseGraphBuilder(cfg.graph)
         self.rng = np.random.default_rng(cfg.seed)
         self.timestamps: list[float] = []
         self.poses_vo: list[np.ndarray] = []
@@ -260,14 +260,33 @@ class Pipeline:
         return out
 
     def _maybe_optimize(self, force: bool = False) -> None:
-        every = self.config.optimize_every
-        if not force and (every <= 0 or self._new_loops < every):
+        """Batch: re-solve after `optimize_every` new loops (and at the end). Incremental: an iSAM2 update whenever
+        loops arrived (nodes alone are batched by the back end), then the current estimate."""
+        if force:
+            self._apply(self.graph.optimize(warm_start=False))
+            self._new_loops = 0
             return
-        if not self.graph_loops and not force:
+        if self._new_loops == 0:
+            return
+        if self.graph.incremental:
+            ids, poses = self.graph.update()
+            k = {int(f): i for i, f in enumerate(self.keyframes)}
+            for fid, p in zip(ids, poses):
+                self.kf_slam[k[int(fid)]] = np.asarray(p, float)
+            # keyframes not yet handed to iSAM2 follow their last estimated predecessor by odometry
+            for i in range(len(ids), len(self.keyframes)):
+                a, b = self.keyframes[i - 1], self.keyframes[i]
+                self.kf_slam[i] = compose(self.kf_slam[i - 1], between(self.poses_vo[a], self.poses_vo[b]))
+            inl = self.graph.loop_inliers()
+            for rec in self.graph_loops:
+                rec.inlier = bool(inl[rec.loop_index])
+            self._new_loops = 0
+            return
+        every = self.config.optimize_every
+        if every <= 0 or self._new_loops < every:
             return
         self.graph.set_guesses(np.asarray(self.kf_slam))
-        res = self.graph.optimize(warm_start=not force)
-        self._apply(res)
+        self._apply(self.graph.optimize(warm_start=True))
         self._new_loops = 0
 
     def _apply(self, res) -> None:
