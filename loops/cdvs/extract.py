@@ -55,9 +55,22 @@ def processed_size(width: int, height: int, max_side: int) -> tuple[int, int]:
 
 
 @functools.lru_cache(maxsize=16)
-def _orb(params: ExtractionParams) -> cv2.ORB:
+def _orb(params: ExtractionParams, threshold: int | None = None) -> cv2.ORB:
     return cv2.ORB_create(nfeatures=params.n_detect, scaleFactor=params.scale_factor, nlevels=params.n_levels,
-                          edgeThreshold=19, patchSize=31, fastThreshold=params.fast_threshold)
+                          edgeThreshold=19, patchSize=31,
+                          fastThreshold=params.fast_threshold if threshold is None else threshold)
+
+
+@functools.lru_cache(maxsize=4)
+def _fast(threshold: int) -> cv2.FastFeatureDetector:
+    return cv2.FastFeatureDetector_create(threshold, True)
+
+
+def detector_for(gray: np.ndarray, params: ExtractionParams) -> cv2.ORB:
+    """ORB with the low FAST threshold, or the high one on corner-dense textures (a quick FAST count on the
+    full-resolution image decides): same keypoints where it matters, several times faster on carpet."""
+    n = len(_fast(params.fast_threshold).detect(gray))
+    return _orb(params, params.dense_threshold if n > params.dense_corners else None)
 
 
 def keypoint_attributes(kps, proc_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -93,7 +106,7 @@ def extract_features(image: np.ndarray, params: ExtractionParams, trained: Train
     pw, ph = processed_size(ow, oh, params.max_side)
     if (pw, ph) != (ow, oh):
         gray = cv2.resize(gray, (pw, ph), interpolation=cv2.INTER_AREA)
-    orb = _orb(params)
+    orb = detector_for(gray, params)
     kps = orb.detect(gray, None)
     n_desc = params.n_described if n_described is None else n_described
     empty = Features((ow, oh), (pw, ph), np.zeros((0, 2), np.float32), np.zeros(0, np.float32),

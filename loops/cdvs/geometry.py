@@ -9,6 +9,8 @@ the histogram excess (observed - scaled outlier model) over the pairs picks them
 """
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from loops.cdvs.params import GeometryModel
@@ -96,14 +98,28 @@ def _fit_similarity(p: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[comple
     return a, qm - a * pm
 
 
+def _apply_similarity(a: complex, b: complex) -> Callable[[np.ndarray], np.ndarray]:
+    def predict(x: np.ndarray) -> np.ndarray:
+        z = a * (x[:, 0] + 1j * x[:, 1]) + b
+        return np.column_stack([z.real, z.imag])
+    return predict
+
+
+def _apply_affine(M: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    def predict(x: np.ndarray) -> np.ndarray:
+        return x @ M[:2] + M[2]
+    return predict
+
+
 def ransac(xa: np.ndarray, xb: np.ndarray, w: np.ndarray, model: GeometryModel, iterations: int,
-           threshold: float, seed: int = 0) -> np.ndarray:
-    """Boolean inlier mask of the best transform after a few vectorised RANSAC iterations, refined once by
-    least squares on its inliers. Deterministic for a given input and seed."""
+           threshold: float, seed: int = 0) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray] | None]:
+    """(inlier mask, fitted transform xa -> xb or None) after a few vectorised RANSAC iterations, refined once by
+    weighted least squares on the inliers. Deterministic for a given input and seed."""
     k = len(xa)
     need = 2 if model is GeometryModel.SIMILARITY else 3
+    none = np.zeros(k, dtype=bool), None
     if k < need + 1:
-        return np.zeros(k, dtype=bool)
+        return none
     rng = np.random.default_rng(seed + k)
     samples = np.argsort(rng.random((iterations, k)), axis=1)[:, :need]
     thr2 = threshold * threshold
@@ -133,16 +149,27 @@ def ransac(xa: np.ndarray, xb: np.ndarray, w: np.ndarray, model: GeometryModel, 
     best = int(np.argmax(score))
     mask = inl[best]
     if mask.sum() < need:
-        return np.zeros(k, dtype=bool)
-    # one least-squares refinement on the inliers, then re-count
+        return none
+    # one weighted least-squares refinement on the inliers, then re-count
     if model is GeometryModel.SIMILARITY:
-        a, b = _fit_similarity(xa[mask], xb[mask], w[mask])
-        pc, qc = xa[:, 0] + 1j * xa[:, 1], xb[:, 0] + 1j * xb[:, 1]
-        r2 = np.abs(a * pc + b - qc) ** 2
+        predict = _apply_similarity(*_fit_similarity(xa[mask], xb[mask], w[mask]))
     else:
         ph = np.concatenate([xa, np.ones((k, 1))], axis=1)
-        M, *_ = np.linalg.lstsq(ph[mask] * np.sqrt(w[mask])[:, None], xb[mask] * np.sqrt(w[mask])[:, None],
-                                rcond=None)
-        r2 = np.sum((ph @ M - xb) ** 2, axis=1)
-    refined = r2 < thr2
-    return refined if refined @ w >= mask @ w else mask
+        sw = np.sqrt(np.maximum(w[mask], 1e-12))[:, None]
+        M, *_ = np.linalg.lstsq(ph[mask] * sw, xb[mask] * sw, rcond=None)
+        predict = _apply_affine(M)
+    refined = np.sum((predict(xa) - xb) ** 2, axis=1) < thr2
+    if refined @ w >= mask @ w:
+        return refined, predict
+    if model is GeometryModel.SIMILARITY:
+        j = samples[best]
+        a0 = (xb[j[1], 0] - xb[j[0], 0] + 1j * (xb[j[1], 1] - xb[j[0], 1])) / \
+             (xa[j[1], 0] - xa[j[0], 0] + 1j * (xa[j[1], 1] - xa[j[0], 1]))
+        return mask, _apply_similarity(a0, (xb[j[0], 0] + 1j * xb[j[0], 1]) - a0 * (xa[j[0], 0] + 1j * xa[j[0], 1]))
+    return mask, _apply_affine(M_best(xa, xb, samples[best]))
+
+
+def M_best(xa: np.ndarray, xb: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """The affine transform through three correspondences."""
+    ph = np.concatenate([xa[j], np.ones((3, 1))], axis=1)
+    return np.linalg.solve(ph, xb[j])

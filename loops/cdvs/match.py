@@ -29,12 +29,30 @@ class MatchResult:
     inlier_weights: np.ndarray  # (K,)
 
 
-def _nearest_two(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per row of a: index of the nearest row of b, its Hamming distance and the second-nearest distance.
-    OpenCV's SIMD Hamming (no BLAS: a GEMM would spin up OpenBLAS threads on a busy machine)."""
-    dist, idx = cv2.batchDistance(a, b, cv2.CV_32S, normType=cv2.NORM_HAMMING, K=2)
-    dist = dist.astype(np.float64)
-    return idx[:, 0].astype(np.int64), dist[:, 0], dist[:, 1]
+def hamming_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """All-pairs Hamming distances (Na, Nb) of packed descriptors whose length is a multiple of 8 bytes.
+    XOR + popcount per 64-bit word in numpy: no BLAS, ~2x faster than two OpenCV batchDistance K=2 calls."""
+    wa, wb = a.view(np.uint64), b.view(np.uint64)
+    d = np.bitwise_count(wa[:, None, 0] ^ wb[None, :, 0]).astype(np.uint16)
+    for w in range(1, wa.shape[1]):
+        d += np.bitwise_count(wa[:, None, w] ^ wb[None, :, w])
+    return d
+
+
+def _nearest_two(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row: index of the nearest column, its distance and the second-nearest distance."""
+    rows = np.arange(d.shape[0])
+    j = d.argmin(axis=1)
+    d1 = d[rows, j].astype(np.float64)
+    e = d.copy()
+    e[rows, j] = np.iinfo(d.dtype).max
+    return j, d1, e.min(axis=1).astype(np.float64)
+
+
+def _pad8(x: np.ndarray) -> np.ndarray:
+    """Pad rows to a multiple of 8 bytes with zeros (zeros do not change Hamming distances)."""
+    extra = (-x.shape[1]) % 8
+    return np.ascontiguousarray(np.pad(x, ((0, 0), (0, extra))) if extra else x)
 
 
 def _one_way(j: np.ndarray, d1: np.ndarray, d2: np.ndarray, ratio: float,
@@ -55,11 +73,10 @@ def local_matches(a: Descriptor, b: Descriptor, p: MatchParams) -> tuple[np.ndar
         e = np.zeros(0, dtype=np.int64)
         return e, e, np.zeros(0)
     n_bytes = min(a.local.shape[1], b.local.shape[1])   # priority-ordered bits: compare the common prefix
-    la = np.ascontiguousarray(a.local[:, :n_bytes])
-    lb = np.ascontiguousarray(b.local[:, :n_bytes])
+    hd = hamming_matrix(_pad8(a.local[:, :n_bytes]), _pad8(b.local[:, :n_bytes]))
     max_d = p.max_distance_frac * 8 * n_bytes
-    i1, j1, w1 = _one_way(*_nearest_two(la, lb), p.ratio, max_d)
-    j2, i2, w2 = _one_way(*_nearest_two(lb, la), p.ratio, max_d)
+    i1, j1, w1 = _one_way(*_nearest_two(hd), p.ratio, max_d)
+    j2, i2, w2 = _one_way(*_nearest_two(hd.T), p.ratio, max_d)
     nb = b.n_local
     k1, k2 = i1 * nb + j1, i2 * nb + j2
     both, x1, x2 = np.intersect1d(k1, k2, return_indices=True)
@@ -88,13 +105,19 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     if len(w) < p.min_matches or w.sum() <= 0:   # (one-way weights are scaled to 0 when no match is two-way)
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     xa, xb = a.xy[ia].astype(np.float64), b.xy[ib].astype(np.float64)
-    keep = distrat_inliers(xa, xb, p.distrat_chi2)
+    # the geometric check runs on the best-weighted matches only (DISTRAT is quadratic in their number); the
+    # transform it yields then decides for every tentative match
+    top = np.argsort(-w, kind="stable")[: p.max_geometry_matches]
+    keep = top[distrat_inliers(xa[top], xb[top], p.distrat_chi2)]
     if len(keep) < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
-    diag = float(np.hypot(*b.proc_size))
-    ok = ransac(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, p.ransac_threshold_frac * diag)
-    keep = keep[ok]
-    if len(keep) < p.min_inliers:
+    thr = p.ransac_threshold_frac * float(np.hypot(*b.proc_size))
+    ok, predict = ransac(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, thr)
+    if predict is None or ok.sum() < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
-    return MatchResult(g, float(w[keep].sum()), len(w), len(keep), a.keypoints[ia[keep]], b.keypoints[ib[keep]],
-                       w[keep])
+    inl = ok if len(top) == len(w) else None
+    final = keep[ok] if inl is not None else np.flatnonzero(np.sum((predict(xa) - xb) ** 2, axis=1) < thr * thr)
+    if len(final) < p.min_inliers:
+        return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
+    return MatchResult(g, float(w[final].sum()), len(w), len(final), a.keypoints[ia[final]], b.keypoints[ib[final]],
+                       w[final])

@@ -27,7 +27,9 @@ class ExtractionParams:
     n_detect: int = 1000           # ORB/FAST keypoints detected on the pyramid before selection
     n_levels: int = 5              # pyramid levels
     scale_factor: float = 1.3      # pyramid scale step
-    fast_threshold: int = 12       # FAST intensity threshold (low: floors are low-contrast)
+    fast_threshold: int = 12       # FAST intensity threshold (low: floors such as tiles are low-contrast)
+    dense_threshold: int = 30      # used instead when the image has more than dense_corners FAST corners
+    dense_corners: int = 5000      # (carpet-like textures: ORB would spend its time scoring 10k+ corners)
     centre_prior: bool = True      # relevance prefers the image centre (photographs); off for floors
     n_described: int = 500        # keypoints (by relevance) that get an ORB descriptor; feed the global descriptor
 
@@ -48,9 +50,10 @@ class ModeParams:
 class MatchParams:
     """Local matching, geometric check and decision."""
 
-    ratio: float = 0.85            # Lowe ratio on Hamming distances (d1 <= ratio * d2)
+    ratio: float = 0.90            # Lowe ratio on Hamming distances (d1 <= ratio * d2)
     max_distance_frac: float = 0.30  # reject nearest neighbours farther than this fraction of the bits
     min_matches: int = 5           # below this, no geometric check (local score 0)
+    max_geometry_matches: int = 96  # DISTRAT + RANSAC see at most this many best-weighted matches (cost ~ K^2)
     distrat_chi2: float = 29.5435  # chi-square(24 dof) 80th percentile: below it the LDR histogram looks like outliers
     ransac_iterations: int = 24    # "a few RANSAC iterations" after DISTRAT (deterministic, seeded)
     ransac_threshold_frac: float = 0.02  # inlier threshold as a fraction of the processed image diagonal
@@ -88,6 +91,6 @@ MODE_PRESETS: dict[int, ModeParams] = {
     2: ModeParams(2, BUDGETS[2], desc_bits=96, max_local=80, global_clusters=40, coord_block=3),
     3: ModeParams(3, BUDGETS[3], desc_bits=128, max_local=120, global_clusters=64, coord_block=3),
     4: ModeParams(4, BUDGETS[4], desc_bits=160, max_local=180, global_clusters=128, coord_block=2),
-    5: ModeParams(5, BUDGETS[5], desc_bits=192, max_local=320, global_clusters=128, coord_block=2),
-    6: ModeParams(6, BUDGETS[6], desc_bits=256, max_local=400, global_clusters=128, coord_block=2),
+    5: ModeParams(5, BUDGETS[5], desc_bits=192, max_local=280, global_clusters=128, coord_block=2),
+    6: ModeParams(6, BUDGETS[6], desc_bits=256, max_local=320, global_clusters=128, coord_block=2),
 }

@@ -25,7 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from loops.cdvs.extract import _orb, keypoint_attributes, processed_size, to_gray_u8
+from loops.cdvs.extract import detector_for, keypoint_attributes, processed_size, to_gray_u8
 from loops.cdvs.params import MODES, CdvsParams, ExtractionParams
 from loops.cdvs.trained import DEFAULT_TRAINED, N_BITS, compute_params_id, save_trained
 
@@ -90,7 +90,7 @@ def prepare(img: np.ndarray, max_side: int) -> np.ndarray:
 
 
 def describe_all(gray: np.ndarray, ex: ExtractionParams):
-    orb = _orb(ex)
+    orb = detector_for(gray, ex)
     kps = orb.detect(gray, None)
     med = np.median([k.response for k in kps]) if kps else 1.0
     kps, desc = orb.compute(gray, kps)

@@ -138,3 +138,20 @@ def test_crafted_headers_with_valid_crc_are_rejected_without_allocating(descs):
         with pytest.raises(DescriptorDecodeError):
             decode(_recrc(bytes(b)))
     assert HEADER_SIZE == 24
+
+
+def test_budget_holds_on_random_crops_of_real_textures(shared_data):
+    paths = sorted(p for p in (shared_data / "textures").rglob("*") if p.suffix.lower() in (".png", ".jpg"))
+    assert paths
+    rng = np.random.default_rng(3)
+    worst = {m: 0 for m in MODES}
+    for k in range(24):
+        img = cv2.imread(str(paths[k % len(paths)]), cv2.IMREAD_GRAYSCALE)
+        h, w = img.shape
+        ch, cw = int(rng.integers(64, h)), int(rng.integers(64, w))
+        y, x = int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1))
+        crop = cv2.resize(img[y:y + ch, x:x + cw], None, fx=rng.uniform(0.5, 2.0), fy=rng.uniform(0.5, 2.0))
+        for m, data in encode_all_modes(crop).items():
+            worst[m] = max(worst[m], len(data))
+            assert len(data) <= BUDGETS[m]
+    assert worst[6] > 4096  # the large modes are actually used, not trivially small

@@ -67,7 +67,7 @@ def test_geometric_check_rejects_a_shuffled_match_set():
         perm = np.random.default_rng(k).permutation(len(xb))
         inl = distrat_inliers(xa, xb[perm], MatchParams().distrat_chi2)
         if len(inl) >= MatchParams().min_inliers:
-            ok = ransac(xa[inl], xb[perm][inl], np.ones(len(inl)), GeometryModel.AFFINE, 24, 12.0)
+            ok, _ = ransac(xa[inl], xb[perm][inl], np.ones(len(inl)), GeometryModel.AFFINE, 24, 12.0)
             rejected += ok.sum() < MatchParams().min_inliers
         else:
             rejected += 1
@@ -89,8 +89,9 @@ def test_ransac_is_deterministic():
     xa, xb = _true_matches(30, rng)
     w = np.ones(30)
     for model in GeometryModel:
-        m1 = ransac(xa, xb, w, model, 12, 3.0)
-        assert np.array_equal(m1, ransac(xa, xb, w, model, 12, 3.0)) and m1.sum() >= 25
+        m1, f1 = ransac(xa, xb, w, model, 12, 3.0)
+        assert np.array_equal(m1, ransac(xa, xb, w, model, 12, 3.0)[0]) and m1.sum() >= 25
+        assert np.median(np.linalg.norm(f1(xa) - xb, axis=1)) < 2.0
 
 
 def test_mixed_modes_match_on_the_common_bits():
