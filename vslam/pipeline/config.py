@@ -99,7 +99,10 @@ class PipelineConfig:
         text = path.read_text(encoding="utf-8")
         try:
             if path.suffix.lower() == ".toml":
-                import tomllib
+                try:
+                    import tomllib
+                except ModuleNotFoundError:   # Python 3.10
+                    import tomli as tomllib
 
                 data = tomllib.loads(text)
             else:
