@@ -215,7 +215,8 @@ def solve(data: PoseGraphData, params: GraphParams, candidates: np.ndarray | Non
                            loss=params.gnc_loss, mu_step=params.gnc_mu_step, max_iterations=params.gnc_max_iterations,
                            inner_iterations=params.gnc_inner_iterations, final_iterations=params.lm_max_iterations,
                            weights_tol=params.gnc_weights_tol, cost_tol=params.gnc_cost_tol,
-                           rel_tol=params.lm_relative_tol, abs_tol=params.lm_absolute_tol)
+                           rel_tol=params.lm_relative_tol, abs_tol=params.lm_absolute_tol,
+                           mu_floor=params.gnc_mu_floor if candidates is not None else 0.0)
         values, iters, gnc_iters = out.values, out.lm_iterations, out.outer_iterations
         initial_cost, final_cost = out.initial_cost, out.final_cost
         inlier[cand] = out.weights > 0.5
@@ -302,6 +303,11 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
         candidates = [inlier, inlier & (r2 <= thr)]
         if params.isolation_window > 0:
             iso = isolated(pos_a, pos_b, inlier, params.isolation_window)
+            if iso.sum() > params.isolation_max_tests:
+                # joint marginals cost ~1-25 ms each: test the isolated loops closest to their threshold
+                ratio = np.where(iso, r2 / thr, -np.inf)
+                iso = np.zeros_like(iso)
+                iso[np.argsort(-ratio)[:params.isolation_max_tests]] = True
             w = standardized_residuals(built.graph(inlier), values, built.loops, iso)
             candidates.append(candidates[1] & ~(iso & (w > thr)))
         for n, labels in enumerate(candidates):

@@ -226,7 +226,7 @@ def _assemble(path, fmt, dim, info_order, v_ids, v_vals, v_lines, e_vals, e_line
         poses = np.column_stack([vv[:, :3], rpy_to_quat(vv[:, 3:6])]) if len(vv) else np.zeros((0, 7))
     else:
         poses = _normalised_quats(path, vv.reshape(-1, 7), v_lines, "vertex")
-    ev = np.asarray(e_vals, float).reshape(len(e_vals), -1)
+    ev = np.asarray(e_vals, float).reshape(len(e_vals), 11 if dim == 2 else (29 if fmt == "toro" else 30))
     e_lines = np.asarray(e_lines)
     ei = ev[:, 0].astype(np.int64) if len(ev) else np.zeros(0, np.int64)
     ej = ev[:, 1].astype(np.int64) if len(ev) else np.zeros(0, np.int64)

@@ -91,10 +91,13 @@ def _lm(graph, values, max_iter: int, rel_tol: float, abs_tol: float) -> tuple[g
 def gnc_optimize(base: gtsam.NonlinearFactorGraph, loops: list, init: gtsam.Values, thresholds: np.ndarray,
                  loss: GncLoss = GncLoss.TLS, mu_step: float = 1.4, max_iterations: int = 100,
                  inner_iterations: int = 10, final_iterations: int = 100, weights_tol: float = 1e-4,
-                 cost_tol: float = 1e-5, rel_tol: float = 1e-5, abs_tol: float = 1e-5) -> GncOutcome:
+                 cost_tol: float = 1e-5, rel_tol: float = 1e-5, abs_tol: float = 1e-5,
+                 mu_floor: float = 0.0) -> GncOutcome:
     """Robust solve of `base` (known inliers) + `loops` (Gaussian factors to classify).
 
     thresholds: (L,) squared Mahalanobis residual below which a loop is an inlier (chi-square quantile).
+    mu_floor: lower bound on the initial control parameter (TLS): with a warm start that already fits the inliers,
+    a near-convex start (mu ~ 1e-3) only makes every loop a half-weight "maybe" for a dozen iterations.
     Returns the solution after a final solve with the converged weights.
     """
     c2 = np.asarray(thresholds, float)
@@ -110,6 +113,8 @@ def gnc_optimize(base: gtsam.NonlinearFactorGraph, loops: list, init: gtsam.Valu
     values, lm_iters = _lm(full, init, inner_iterations, rel_tol, abs_tol)
     r2 = squared_residuals(loops, values)
     mu = initial_mu(loss, r2, c2)
+    if mu > 0 and loss == GncLoss.TLS:
+        mu = max(mu, mu_floor)
     outer = 0
     if mu > 0:
         prev_cost = float(full.error(values))

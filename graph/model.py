@@ -136,7 +136,23 @@ class PoseGraphData:
         return (np.allclose(self.poses, other.poses, rtol=rtol, atol=atol, equal_nan=True)
                 and np.allclose(self.measurements, other.measurements, rtol=rtol, atol=atol)
                 and np.allclose(self.information, other.information, rtol=rtol, atol=atol)
-                and np.allclose(self.probability, other.probability, rtol=rtol, atol=atol))
+                and np.allclose(self.probability, other.probability, rtol=rtol, atol=atol, equal_nan=True))
+
+
+def information_from(cov: np.ndarray | None, information: np.ndarray | None, d: int) -> np.ndarray:
+    """The information matrix from exactly one of a covariance or an information matrix (d x d, symmetric,
+    positive definite); ValueError naming the problem otherwise."""
+    if (cov is None) == (information is None):
+        raise ValueError("give exactly one of cov and information")
+    name = "information" if cov is None else "cov"
+    m = np.asarray(information if cov is None else cov, float)
+    if m.shape != (d, d):
+        raise ValueError(f"{name} must be {d}x{d}, got shape {m.shape}")
+    if not np.all(np.isfinite(m)) or np.abs(m - m.T).max() > 1e-9 * max(np.abs(m).max(), 1e-300):
+        raise ValueError(f"{name} must be finite and symmetric")
+    if np.linalg.eigvalsh(m)[0] <= 0:
+        raise ValueError(f"{name} must be positive definite")
+    return m if cov is None else np.linalg.inv(m)
 
 
 def classify_edges(node_ids: np.ndarray, edge_from: np.ndarray, edge_to: np.ndarray) -> np.ndarray:

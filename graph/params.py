@@ -69,7 +69,8 @@ class GraphParams:
     gnc_impl: GncImpl = GncImpl.WARM
     gnc_mu_step: float = 1.4             # factor on the GNC control parameter per outer iteration
     gnc_max_iterations: int = 100        # outer iterations
-    gnc_inner_iterations: int = 10       # LM iterations per outer iteration (warm-started)
+    gnc_inner_iterations: int = 5        # LM iterations per outer iteration (warm-started)
+    gnc_mu_floor: float = 1.0            # initial control parameter at least this after the gate's warm start
     gnc_weights_tol: float = 1e-4        # stop when weights are binary to this tolerance (TLS)
     gnc_cost_tol: float = 1e-5           # ... or when the weighted cost changes less than this, relative
     reinit_rounds: int = 5               # after the robust solve: descend the TLS objective with re-initialisation
@@ -80,6 +81,7 @@ class GraphParams:
     fence_quantile: float = 0.9          # ... (heavy tails: a high quantile, not the median)
     isolation_window: int = 5            # kept loops with no other kept loop within this many nodes at both ends get
     #                                      the standardized-residual test in those rounds (0: off)
+    isolation_max_tests: int = 50        # at most this many per round (largest r^2 / threshold first)
     huber_k: float = 1.345               # kernel width on the whitened residual norm
     cauchy_k: float = 1.0
     loop_weighting: LoopWeighting = LoopWeighting.THRESHOLD
@@ -88,8 +90,12 @@ class GraphParams:
     gate_loops: bool = True              # batch robust solves run the gated incremental pass first (see README)
     gate_uncertainty: bool = True        # add the newer endpoint's marginal covariance to the arrival test
     gate_probability: float = 0.9999     # chi-square quantile of the arrival test (loop + current pose uncertainty)
-    gate_factor: float = 10.0            # fence factor on the arrival residuals of admitted loops (see fence_scale)
-    gate_window: int = 500               # arrival residuals of the latest admitted loops used for that scale
+    gate_factor: float = 50.0            # admit up to this many times ...
+    gate_quantile: float = 0.25          # ... this quantile of the recent arrival r^2 (all gated loops)
+    gate_batch_nodes: int = 50           # nodes per iSAM2 update in the batch solver's gate pass (each update costs
+    #                                      a relinearisation check and one estimate; the drift in between is modelled)
+    gate_window: int = 500               # number of recent arrivals in that quantile
+    gate_min_loops: int = 20             # before this many admitted loops, only the stated model gates
     # --- iSAM2
     isam2_relinearize_threshold: float = 0.1
     isam2_relinearize_skip: int = 10

@@ -45,6 +45,14 @@ class GraphResult:
             raise KeyError(f"unknown node id {node_id}")
         return self.poses[k[0]].copy()
 
+    def write_tum(self, path: str | os.PathLike, timestamps: np.ndarray | None = None) -> None:
+        """The optimised trajectory in TUM format (timestamps default to the node ids)."""
+        write_tum(path, self, timestamps)
+
+    def write_g2o(self, path: str | os.PathLike, data: PoseGraphData) -> None:
+        """`data` (the graph this result solves) with the optimised vertices; TORO for *.graph."""
+        write_g2o(path, data, self)
+
     def summary(self) -> str:
         return (f"{len(self.node_ids)} nodes, solver {self.solver}, robust {self.robust}, init {self.init}: "
                 f"cost {self.initial_cost:.6g} -> {self.final_cost:.6g}, {self.iterations} iterations"
