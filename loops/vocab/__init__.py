@@ -10,11 +10,11 @@ localization using a visual bag of words approach" (hierarchical vocabulary of N
 inverted index, chi-square; BRIEF, BRIEFROT, ORB, SURF, colour vocabularies; mu1 / mu2).
 """
 from .database import BowDatabase, EmptyMemoryError, Scores, similarity_dense
-from .evaluate import Evaluation, QueryResult, evaluate
-from .features import GrayscaleImageError, NoFeaturesError, brief_angles, extract, is_grayscale
+from .evaluate import Evaluation, QueryResult, evaluate, evaluate_descriptors, score_rankings
+from .features import GrayscaleImageError, NoFeaturesError, brief_angles, extract, extraction_key, is_grayscale
 from .fileformat import VocabFileError, load_arrays, save_arrays
 from .kinds import DescriptorKind
-from .memory import Ranking, VisualMemory, merge_max
+from .memory import Ranking, VisualMemory, merge_max, vocabulary_seed
 from .metrics import PRCurve, Summary, full_ranks, mu1, mu2, pr_curve, recall_at, repeatability
 from .params import PRESETS, DescriptorName, Distance, VocabParams, preset
 from .tree import VocabularyTree, build_tree, load_vocabulary, save_vocabulary
@@ -23,6 +23,7 @@ __all__ = [
     "BowDatabase", "DescriptorKind", "DescriptorName", "Distance", "EmptyMemoryError", "Evaluation",
     "GrayscaleImageError", "NoFeaturesError", "PRCurve", "PRESETS", "QueryResult", "Ranking", "Scores", "Summary",
     "VisualMemory", "VocabFileError", "VocabParams", "VocabularyTree", "brief_angles", "build_tree", "evaluate",
-    "extract", "full_ranks", "is_grayscale", "load_arrays", "load_vocabulary", "merge_max", "mu1", "mu2",
-    "pr_curve", "preset", "recall_at", "repeatability", "save_arrays", "save_vocabulary", "similarity_dense",
+    "evaluate_descriptors", "extract", "extraction_key", "full_ranks", "is_grayscale", "load_arrays",
+    "load_vocabulary", "merge_max", "mu1", "mu2", "pr_curve", "preset", "recall_at", "repeatability", "save_arrays",
+    "save_vocabulary", "score_rankings", "similarity_dense", "vocabulary_seed",
 ]

@@ -116,6 +116,15 @@ class BowDatabase:
         keys = keys[order]
         return Scores(keys, s[keys], shared[keys])
 
+    def image_words(self, i: int) -> np.ndarray:
+        """The word ids of key image i's descriptors (each repeated by its count), as stored."""
+        sl = slice(self.counts_ptr[i], self.counts_ptr[i + 1])
+        return np.repeat(self.counts_word[sl].astype(np.int64), self.counts_n[sl])
+
+    def score_image(self, i: int, min_shared: int = 5) -> Scores:
+        """Key image i, as stored, scored against every key image (itself included, with similarity 1)."""
+        return self.score(self.image_words(i), min_shared)
+
     def to_arrays(self, prefix: str = "") -> dict[str, np.ndarray]:
         return {f"{prefix}counts_ptr": self.counts_ptr, f"{prefix}counts_word": self.counts_word,
                 f"{prefix}counts_n": self.counts_n}

@@ -3,13 +3,15 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Mapping, Sequence
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
 from .features import NoFeaturesError
 from .memory import Ranking, VisualMemory
 from .metrics import Summary, mu1, mu2, pr_curve, recall_at, summarise
+
+_EMPTY = Ranking(np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64))
 
 
 @dataclass(frozen=True)
@@ -61,43 +63,59 @@ class Evaluation:
 
 
 def evaluate(memory: VisualMemory, queries: Iterable[tuple[str, np.ndarray, np.ndarray | None]],
-             truth: Mapping[str, Sequence[int]], key_image: Callable[[int], np.ndarray] | None = None,
-             key_descriptors: Callable[[int], np.ndarray] | None = None) -> Evaluation:
-    """queries yields (name, image, mask or None); truth maps a query name to its true key indices. For mu2's
-    key-to-key similarities z_l(I*_k), key k is itself queried against the memory: pass key_image(k) (its image),
-    or key_descriptors(k) (its plain-pattern descriptors, saves re-extracting them). The time per query is feature
-    extraction + scoring (image decoding excluded)."""
-    if key_image is None and key_descriptors is None:
-        raise ValueError("evaluate needs key_image or key_descriptors for mu2")
+             truth: Mapping[str, Sequence[int]]) -> Evaluation:
+    """queries yields (name, image, mask or None); truth maps a query name to its true key indices. The time per
+    query is feature extraction + scoring (image decoding excluded). A query without features is a miss."""
+    def ranked():
+        for name, image, mask in queries:
+            t0 = time.perf_counter()
+            try:
+                ranking, error = memory.query(image, mask, name=name), ""
+            except NoFeaturesError as exc:
+                ranking, error = _EMPTY, str(exc)
+            yield name, ranking, time.perf_counter() - t0, error
+
+    return score_rankings(memory, ranked(), truth)
+
+
+def evaluate_descriptors(memory, queries: Iterable[tuple[str, np.ndarray | None, float]],
+                         truth: Mapping[str, Sequence[int]]) -> Evaluation:
+    """Like evaluate() for descriptors extracted beforehand: queries yields (name, plain-pattern descriptors or
+    None when the image had none, seconds the extraction took); the time per query is that plus the scoring.
+    `memory` is anything with query_descriptors() and __len__ (key_similarity() too, for mu2)."""
+    def ranked():
+        for name, descriptors, extract_s in queries:
+            if descriptors is None or len(descriptors) == 0:
+                yield name, _EMPTY, extract_s, f"{name}: no features"
+                continue
+            t0 = time.perf_counter()
+            ranking = memory.query_descriptors(descriptors)
+            yield name, ranking, extract_s + time.perf_counter() - t0, ""
+
+    return score_rankings(memory, ranked(), truth)
+
+
+def score_rankings(memory, rankings: Iterable[tuple[str, Ranking, float, str]],
+                   truth: Mapping[str, Sequence[int]]) -> Evaluation:
+    """mu1 (eq. 3) and mu2 (eq. 4) of each (name, ranking, seconds, error). mu2 weighs the ranks by the key images'
+    similarity to the true key, z_l(I*_k) = memory.key_similarity(k); with several true keys the best (lowest)
+    mu1 and mu2 count. A memory without key_similarity() (a foreign implementation) gets mu2 = nan."""
     n = len(memory)
     out = Evaluation(n)
-    self_sim: dict[int, np.ndarray] = {}
+    z_cache: dict[int, np.ndarray] = {}
+    has_z = hasattr(memory, "key_similarity")
 
     def z_of(k: int) -> np.ndarray:
-        if k not in self_sim:
-            try:
-                if key_descriptors is not None:
-                    self_sim[k] = memory.query_descriptors(key_descriptors(k)).dense_scores(n)
-                else:
-                    self_sim[k] = memory.query(key_image(k), name=memory.key_names[k]).dense_scores(n)
-            except NoFeaturesError:
-                self_sim[k] = np.zeros(n)
-            if self_sim[k].sum() <= 0:
-                self_sim[k][k] = 1.0  # a key with no usable words only resembles itself
-        return self_sim[k]
+        if k not in z_cache:
+            z_cache[k] = memory.key_similarity(k)
+        return z_cache[k]
 
-    for name, image, mask in queries:
+    for name, ranking, seconds, error in rankings:
         true = tuple(int(t) for t in truth.get(name, ()))
-        t0 = time.perf_counter()
-        try:
-            ranking, error = memory.query(image, mask, name=name), ""
-        except NoFeaturesError as exc:
-            ranking, error = Ranking(np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)), str(exc)
-        dt = time.perf_counter() - t0
         if true:
             m1 = mu1(ranking.keys, true, n)
-            m2 = min(mu2(ranking.keys, z_of(k), n) for k in true)
-            out.results.append(QueryResult(name, ranking, true, dt, m1, m2, error))
+            m2 = min(mu2(ranking.keys, z_of(k), n) for k in true) if has_z else float("nan")
+            out.results.append(QueryResult(name, ranking, true, seconds, m1, m2, error))
         else:
-            out.results.append(QueryResult(name, ranking, true, dt, error=error))
+            out.results.append(QueryResult(name, ranking, true, seconds, error=error))
     return out

@@ -67,6 +67,20 @@ def brief_angles(params: VocabParams) -> tuple[float, ...]:
     return (0.0,)
 
 
+def extraction_key(params: VocabParams) -> tuple:
+    """The parameters that decide what extract() returns for an image (per pattern angle): equal keys give equal
+    descriptors, so callers can cache them. BRIEF and BRIEFROT share their plain-pattern descriptors."""
+    d = params.descriptor
+    if d in (DescriptorName.BRIEF, DescriptorName.BRIEFROT):
+        return ("brief", params.n_features, params.min_image_side, params.brief_patch, params.brief_sigma,
+                params.brief_pattern_seed)
+    if d in (DescriptorName.ORB, DescriptorName.SURF):
+        return (d.value, params.n_features, params.min_image_side)
+    seed = params.seed if d is DescriptorName.COLOR_RANDOM else None   # random patches are drawn from the seed
+    return (d.value, params.color_random_patches, params.color_grid, params.color_patch_fraction, params.hs_bins,
+            seed)
+
+
 def extract(image: np.ndarray, params: VocabParams, mask: np.ndarray | None = None,
             angles: tuple[float, ...] = (0.0,), name: str = "image") -> list[np.ndarray]:
     """Descriptors of one image (BGR or grey uint8), one array per pattern angle (angles other than 0 only for

@@ -22,6 +22,12 @@ from .tree import VocabularyTree, build_tree
 FILE_KIND = "vslam-visual-memory"
 
 
+def vocabulary_seed(params: VocabParams, o: int) -> int:
+    """Build seed of vocabulary o (pattern angle index): the vocabularies of a BRIEFROT memory get distinct seeds,
+    three independent internal vocabularies; vocabulary 0 is the BRIEF vocabulary of the same seed."""
+    return params.seed + 7919 * o
+
+
 @dataclass(frozen=True)
 class Ranking:
     """Candidate key images, best first: indices into the memory, scores in [0, 1], and for each the vocabulary
@@ -97,16 +103,28 @@ class VisualMemory:
     def from_descriptors(cls, per_angle: list[list[np.ndarray]], names: Sequence[str], params: VocabParams,
                          angles: tuple[float, ...] | None = None) -> "VisualMemory":
         """Build from precomputed descriptors: per_angle[o][i] = descriptors of key image i under pattern angle o."""
-        angles = brief_angles(params) if angles is None else tuple(angles)
-        if len(names) == 0 or len(per_angle[0]) == 0:
+        if len(names) == 0 or len(per_angle) == 0 or len(per_angle[0]) == 0:
             raise EmptyMemoryError("the visual memory has no key images")
-        trees, dbs = [], []
-        for o, descs in enumerate(per_angle):
-            # vocabularies of a BRIEFROT memory get distinct seeds: three independent internal vocabularies
-            tree = build_tree(np.concatenate(descs), params.k, params.depth, seed=params.seed + 7919 * o,
-                              iters=params.kmeans_iters, max_train=params.max_train_descriptors)
-            trees.append(tree)
-            dbs.append(BowDatabase.from_words([tree.transform(d) for d in descs], tree.n_words, params.distance))
+        trees = [build_tree(np.concatenate(descs), params.k, params.depth, seed=vocabulary_seed(params, o),
+                            iters=params.kmeans_iters, max_train=params.max_train_descriptors,
+                            restarts=params.kmeans_restarts)
+                 for o, descs in enumerate(per_angle)]
+        return cls.from_trees(trees, per_angle, names, params, angles)
+
+    @classmethod
+    def from_trees(cls, trees: Sequence[VocabularyTree], per_angle: list[list[np.ndarray]], names: Sequence[str],
+                   params: VocabParams, angles: tuple[float, ...] | None = None) -> "VisualMemory":
+        """Assemble a memory from vocabularies already built (one per pattern angle) and the key descriptors."""
+        angles = brief_angles(params) if angles is None else tuple(angles)
+        if len(names) == 0 or len(per_angle) == 0 or len(per_angle[0]) == 0:
+            raise EmptyMemoryError("the visual memory has no key images")
+        if not (len(trees) == len(per_angle) == len(angles)):
+            raise ValueError(f"{len(trees)} vocabularies and {len(per_angle)} descriptor sets for "
+                             f"{len(angles)} pattern angles")
+        if any(len(descs) != len(names) for descs in per_angle):
+            raise ValueError(f"descriptor sets do not match the {len(names)} key names")
+        dbs = [BowDatabase.from_words([tree.transform(d) for d in descs], tree.n_words, params.distance)
+               for tree, descs in zip(trees, per_angle)]
         return cls(params, tuple(names), tuple(angles), tuple(trees), tuple(dbs))
 
     # ---- queries -------------------------------------------------------------------------------------------
@@ -117,6 +135,19 @@ class VisualMemory:
     def query_descriptors(self, descriptors: np.ndarray) -> Ranking:
         return merge_max([db.score(tree.transform(descriptors), self.params.min_shared_words)
                           for tree, db in zip(self.trees, self.databases)])
+
+    def key_similarity(self, k: int) -> np.ndarray:
+        """z_l(I*_k) of the paper's eq. 4 for every key image l: the similarity of key image k to key image l as
+        the memory represents them (their stored word histograms, compared with the memory's distance; 0 for key
+        images sharing fewer than min_shared_words words with k; 1 for k itself). For BRIEFROT it is the maximum
+        over the three vocabularies (eq. 2), each comparing the two key images in that vocabulary's own
+        representation (both described with the pattern at the same angle): the rotated vocabularies exist to
+        absorb the rotation of a query, and matching a key's plain descriptors against other keys' rotated ones
+        only adds chance word collisions with unrelated key images."""
+        z = merge_max([db.score_image(k, self.params.min_shared_words) for db in self.databases]
+                      ).dense_scores(len(self))
+        z[k] = 1.0  # also for a key with (almost) no words, which is not a candidate of itself
+        return z
 
     # ---- files ---------------------------------------------------------------------------------------------
     def save(self, path: str | Path) -> None:

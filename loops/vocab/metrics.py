@@ -26,8 +26,10 @@ def mu1(ranked_keys: np.ndarray, true_keys, n_keys: int) -> float:
 
 def mu2(ranked_keys: np.ndarray, key_similarity: np.ndarray, n_keys: int) -> float:
     """Eq. 4: sum over key images l of z_l(I*_k) / sum_l' z_l'(I*_k) * rank(l), where key_similarity[l] =
-    z_l(I*_k) is the score of key l when the true key image k itself is the query. Close look-alikes of the true
-    key ranked high keep mu2 low; mu2 = mu1 when the true key resembles no other key."""
+    z_l(I*_k) is the similarity of key image l to the true key image k (VisualMemory.key_similarity: 1 for k
+    itself, 0 for keys that share too few words with it). Near-duplicates of the true key ranked high keep mu2
+    low; mu2 = mu1 when the true key resembles no other key. Unranked keys take the mean of the remaining ranks
+    (full_ranks)."""
     z = np.asarray(key_similarity, float)
     total = z.sum()
     if total <= 0:
@@ -86,7 +88,7 @@ class Summary:
 
     n_tests: int
     correct_mu1: int
-    correct_mu2: int
+    correct_mu2: int | None      # None when mu2 is not available (a memory without key-to-key similarities)
     recall1: float
     recall5: float
     average_precision: float
@@ -98,14 +100,15 @@ class Summary:
 
     @property
     def eff_mu2(self) -> float:
-        return 100.0 * self.correct_mu2 / max(self.n_tests, 1)
+        return float("nan") if self.correct_mu2 is None else 100.0 * self.correct_mu2 / max(self.n_tests, 1)
 
 
 def summarise(mu1s, mu2s, recall1s, recall5s, top_scores, top_correct, times_s, mu2_threshold: float = 2.5
               ) -> Summary:
     mu1s, mu2s = np.asarray(mu1s, float), np.asarray(mu2s, float)
     pr = pr_curve(top_scores, top_correct)
-    return Summary(len(mu1s), int((mu1s == 1).sum()), int((mu2s < mu2_threshold).sum()),
+    correct_mu2 = None if len(mu2s) and np.isnan(mu2s).all() else int((mu2s < mu2_threshold).sum())
+    return Summary(len(mu1s), int((mu1s == 1).sum()), correct_mu2,
                    float(np.mean(recall1s)) if len(mu1s) else float("nan"),
                    float(np.mean(recall5s)) if len(mu1s) else float("nan"), pr.average_precision,
                    float(np.median(times_s)) * 1e3 if len(times_s) else float("nan"))

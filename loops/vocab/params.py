@@ -66,6 +66,7 @@ class VocabParams:
     k: int = 10
     depth: int = 5
     kmeans_iters: int = 10
+    kmeans_restarts: int = 1               # k-means++ runs per node, the lowest inertia kept (3 measured no steadier)
     seed: int = 0
     max_train_descriptors: int = 200_000   # a seeded subsample trains the tree when the memory has more
     # database and scoring
@@ -89,6 +90,7 @@ class VocabParams:
         object.__setattr__(self, "distance", Distance(self.distance))
         checks = [(self.k >= 2, "k must be >= 2"), (self.depth >= 1, "depth must be >= 1"),
                   (self.kmeans_iters >= 1, "kmeans_iters must be >= 1"),
+                  (self.kmeans_restarts >= 1, "kmeans_restarts must be >= 1"),
                   (self.min_shared_words >= 1, "min_shared_words must be >= 1"),
                   (self.n_features >= 1, "n_features must be >= 1"),
                   (self.brief_patch >= 8, "brief_patch must be >= 8"),

@@ -8,18 +8,17 @@ it level by level for all descriptors at once:
     word     (n_nodes,)    int32 word id of each leaf, -1 for inner nodes
 
 Like DBoW2, a node with at most k descriptors gets one child per distinct descriptor, so leaves can sit above
-depth L. Each node's k-means uses its own generator seeded with (seed, node id): the same descriptors and seed
-give the same tree whatever the order in which nodes are processed.
+depth L. The tree is built level by level, all nodes of a level clustered in one vectorised k-means (kmeans.py);
+the same descriptors and seed give the same tree.
 """
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from .kinds import DescriptorKind, as_storage, batched_distances, kind_of
-from .kmeans import kmeans
+from .kmeans import grouped_kmeans
 
 
 @dataclass(frozen=True)
@@ -81,9 +80,15 @@ class VocabularyTree:
 
 
 def build_tree(descriptors: np.ndarray, k: int, depth: int, seed: int = 0, iters: int = 10,
-               max_train: int | None = None) -> VocabularyTree:
+               max_train: int | None = None, restarts: int = 1) -> VocabularyTree:
     """Build a vocabulary from training descriptors (binary uint8 rows or float rows). With more than `max_train`
-    rows, a seeded random subsample of that size is clustered."""
+    rows, a seeded random subsample of that size is clustered. `restarts` k-means++ runs per node, keeping the
+    one of lowest inertia.
+
+    The tree grows level by level: all nodes of a level are clustered together (kmeans.grouped_kmeans), with the
+    level's draws from a generator seeded by (seed, level). A node stops splitting at depth L, when it holds one
+    row, or when its rows all coincide; a node of at most k distinct rows gets one child per distinct row (k-means++
+    seeds exactly those), as in DBoW2."""
     kind = kind_of(descriptors)
     x = as_storage(descriptors, kind)
     if x.ndim != 2 or len(x) == 0:
@@ -91,41 +96,47 @@ def build_tree(descriptors: np.ndarray, k: int, depth: int, seed: int = 0, iters
     if max_train is not None and len(x) > max_train:
         pick = np.sort(np.random.default_rng([seed, 0x7EA1]).choice(len(x), max_train, replace=False))
         x = x[pick]
-    centres = [np.zeros(x.shape[1], x.dtype)]
-    children: list[list[int]] = [[]]
-    queue = deque([(0, np.arange(len(x)), 0)])
-    while queue:
-        node, idx, level = queue.popleft()
-        if level >= depth or len(idx) <= 1:
-            continue
-        if len(idx) <= k:
-            # DBoW2: few descriptors -> each distinct one becomes a child (and a word)
-            first: dict[bytes, int] = {}
-            for i in range(len(idx)):
-                first.setdefault(x[idx[i]].tobytes(), i)
-            groups = [(x[idx[i]], idx[i:i + 1]) for i in sorted(first.values())]
-            if len(groups) == 1:
-                continue
-        else:
-            labels, c = kmeans(kind, x[idx], k, np.random.default_rng([seed, node]), iters)
-            if len(c) == 1:
-                continue  # all descriptors identical: this node stays a leaf
-            order = np.argsort(labels, kind="stable")
-            bounds = np.cumsum(np.bincount(labels, minlength=len(c)))[:-1]
-            groups = list(zip(c, np.split(idx[order], bounds)))
-        for centre, members in groups:
-            child = len(centres)
-            centres.append(centre)
-            children.append([])
-            children[node].append(child)
-            queue.append((child, members, level + 1))
-    child_table = np.full((len(children), k), -1, np.int32)
-    for i, ch in enumerate(children):
-        child_table[i, :len(ch)] = ch
+    new_centres: list[np.ndarray] = [np.zeros((1, x.shape[1]), x.dtype)]
+    parents: list[np.ndarray] = [np.full(1, -1, np.int64)]
+    n_nodes = 1
+    rows = np.arange(len(x))               # rows still being split, sorted by node
+    node = np.zeros(len(x), np.int64)      # their node
+    for level in range(depth):
+        ids, inverse, counts = np.unique(node, return_inverse=True, return_counts=True)
+        splittable = counts >= 2
+        if not splittable.any():
+            break
+        keep = splittable[inverse]
+        rows, ids, group = rows[keep], ids[splittable], np.cumsum(splittable)[inverse[keep]] - 1
+        labels, c, used = grouped_kmeans(kind, x[rows], group, len(ids), k, np.random.default_rng([seed, level]),
+                                         iters, restarts)
+        split = used.sum(axis=1) >= 2    # a node whose rows all fell in one cluster (all equal) stays a leaf
+        made = used & split[:, None]
+        child = np.full(made.shape, -1, np.int64)
+        child[made] = n_nodes + np.arange(int(made.sum()))   # breadth-first ids: by parent, then by cluster
+        new_centres.append(c[made])
+        parents.append(np.repeat(ids, made.sum(axis=1)))
+        n_nodes += int(made.sum())
+        node = child[group, labels]
+        keep = node >= 0
+        rows, node = rows[keep], node[keep]
+        order = np.argsort(node, kind="stable")
+        rows, node = rows[order], node[order]
+        if len(rows) == 0:
+            break
+    centres = np.concatenate(new_centres)
+    parent = np.concatenate(parents)
+    child_table = np.full((n_nodes, k), -1, np.int32)
+    ch = np.arange(1, n_nodes)
+    p = parent[1:]
+    # children of a parent have consecutive ids: slot = id - first child id of that parent
+    first = np.full(n_nodes, n_nodes, np.int64)
+    np.minimum.at(first, p, ch)
+    child_table[p, ch - first[p]] = ch
     leaves = child_table[:, 0] < 0
-    word = np.full(len(children), -1, np.int32)
+    word = np.full(n_nodes, -1, np.int32)
     word[leaves] = np.arange(int(leaves.sum()), dtype=np.int32)
-    return VocabularyTree(kind, k, depth, np.stack(centres), child_table, word)
+    return VocabularyTree(kind, k, depth, centres, child_table, word)
 
 
 VOCAB_FILE_KIND = "vslam-vocabulary"

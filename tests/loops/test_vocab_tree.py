@@ -118,3 +118,49 @@ def test_corrupted_vocabulary_files_give_clear_errors(tmp_path):
 def test_empty_training_set_is_an_error():
     with pytest.raises(ValueError, match="zero descriptors"):
         build_tree(np.zeros((0, 32), np.uint8), 4, 2)
+
+
+def _plain_lloyd(kind, x, group, n_groups, k, seeds, valid, iters):
+    """Reference: textbook Lloyd iterations, group by group, from the given seeds (no bounds, no shortcuts)."""
+    labels = np.zeros(len(x), np.int64)
+    cents = x[seeds].copy()
+    for g in range(n_groups):
+        rows = np.nonzero(group == g)[0]
+        c = cents[g]
+        lab = None
+        for it in range(iters + 1):
+            d = distances(kind, x[rows], c)
+            d[:, ~valid[g]] = np.inf
+            new = np.argmin(d, axis=1)
+            if lab is not None and np.array_equal(new, lab):
+                break
+            lab = new
+            if it == iters:
+                break
+            new_c, sizes = centres(kind, x[rows], lab, k)
+            new_c[sizes == 0] = c[sizes == 0]
+            c = new_c
+        labels[rows], cents[g] = lab, c
+    return labels, cents
+
+
+@pytest.mark.parametrize("kind", [DescriptorKind.BINARY, DescriptorKind.FLOAT])
+def test_grouped_kmeans_equals_plain_lloyd_per_group(kind):
+    """All nodes of a level clustered at once, with active-group, incremental-sum and Hamerly-bound shortcuts,
+    give what plain Lloyd gives on each group from the same k-means++ seeds."""
+    from loops.vocab.kmeans import grouped_kmeans, grouped_kmeanspp
+
+    rng = np.random.default_rng(3)
+    if kind is DescriptorKind.BINARY:
+        x = _binary(1500, seed=2, n_modes=20)
+    else:
+        x = (rng.normal(size=(1500, 8)) + rng.integers(0, 4, (1500, 1))).astype(np.float32)
+    sizes = [700, 500, 5, 3, 292]          # big groups, tiny ones (fewer rows than k), one of 3 rows
+    group = np.repeat(np.arange(len(sizes)), sizes)
+    k, iters = 6, 20
+    labels, c, used = grouped_kmeans(kind, x, group, len(sizes), k, np.random.default_rng(11), iters)
+    seeds, valid = grouped_kmeanspp(kind, x, group, len(sizes), k, np.random.default_rng(11).random((len(sizes), k)))
+    ref_labels, ref_c = _plain_lloyd(kind, x, group, len(sizes), k, seeds, valid, iters)
+    assert np.array_equal(labels, ref_labels)
+    assert np.allclose(c[used].astype(float), ref_c[used].astype(float), atol=1e-4)
+    assert used[3].sum() == 3 and used[2].sum() == 5     # tiny groups: one cluster per distinct row

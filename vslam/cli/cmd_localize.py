@@ -142,10 +142,6 @@ def run(args: argparse.Namespace) -> int:  # pragma: no cover - argparse dispatc
     return args.func(args)
 
 
-def _load_images(items):
-    return [read_image(p) for _, p in items]
-
-
 def _run_build(args: argparse.Namespace) -> int:
     import time
 
@@ -212,9 +208,8 @@ def _run_eval(args: argparse.Namespace) -> int:
     truth = read_truth(args.truth, query_names, key_names)
     if not truth:
         raise ValueError(f"{args.truth}: no ground-truth rows")
-    key_images = _load_images(keys)
-    memory = VisualMemory.build(key_images, key_names, params)
-    ev = evaluate(memory, ((n, read_image(p), None) for n, p in queries), truth, lambda i: key_images[i])
+    memory = VisualMemory.build((read_image(p) for _, p in keys), key_names, params)
+    ev = evaluate(memory, ((n, read_image(p), None) for n, p in queries), truth)
     write_report(Path(args.out), ev, memory, title=f"{Path(args.memory_dir).name} vs {Path(args.queries_dir).name}")
     print((Path(args.out) / "report.md").read_text())
     return 0
@@ -259,8 +254,10 @@ def format_paper_table(rows) -> str:
     """The paper's Tables 2-7 layout (+ Recall@1/5 and average precision); rows = [(label, Summary)]."""
     from vslam.bench._common import format_table
 
-    return format_table(PAPER_HEADERS, [(label, s.n_tests, s.correct_mu1, round(s.eff_mu1, 2), s.correct_mu2,
-                                         round(s.eff_mu2, 2), round(s.recall1, 3), round(s.recall5, 3),
+    return format_table(PAPER_HEADERS, [(label, s.n_tests, s.correct_mu1, round(s.eff_mu1, 2),
+                                         "n/a" if s.correct_mu2 is None else s.correct_mu2,
+                                         "n/a" if s.correct_mu2 is None else round(s.eff_mu2, 2),
+                                         round(s.recall1, 3), round(s.recall5, 3),
                                          round(s.average_precision, 3), round(s.median_ms, 1)) for label, s in rows],
                         floatfmt=".4g")
 

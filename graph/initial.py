@@ -1,0 +1,81 @@
+"""Initial guesses for batch solving: odometry spanning tree, LAGO (planar), chordal relaxation (3D)."""
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+import gtsam
+from graph.factors import array_from_values, from_pose, to_pose
+from graph.model import POSE_WIDTH, PoseGraphData
+
+
+def spanning_tree_guess(data: PoseGraphData, anchors: np.ndarray, anchor_poses: np.ndarray,
+                        a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Compose edge measurements outwards from the anchors, preferring odometry edges.
+
+    A 0-1 breadth-first search (odometry costs 0, a loop 1) builds the tree that uses the fewest loop closures, so
+    false loops cannot corrupt the guess of a graph whose odometry chain is connected. Nodes no edge reaches keep
+    the identity pose. Edges are used in either direction (w10000 stores them newer -> older).
+    """
+    n = data.num_nodes
+    dim = data.dim
+    adj: list[list[tuple[int, int, bool]]] = [[] for _ in range(n)]
+    is_loop = data.is_loop.tolist()
+    for e, (i, j) in enumerate(zip(a.tolist(), b.tolist())):
+        adj[i].append((j, e, True))      # forward: x_j = x_i * z
+        adj[j].append((i, e, False))     # backward: x_i = x_j * z^-1
+    big = n + len(is_loop) + 1
+    cost = [big] * n
+    parent_edge = [-1] * n
+    forward = [False] * n
+    parent = [-1] * n
+    dq: deque[int] = deque()
+    for k in anchors.tolist():
+        cost[k] = 0
+        dq.append(k)
+    while dq:
+        u = dq.popleft()
+        for v, e, fwd in adj[u]:
+            w = cost[u] + is_loop[e]
+            if w < cost[v]:
+                cost[v] = w
+                parent[v], parent_edge[v], forward[v] = u, e, fwd
+                (dq.append if is_loop[e] else dq.appendleft)(v)
+    # compose along the tree: walk up from each node to the first one already placed, then back down
+    poses = [None] * n
+    meas = [to_pose(dim, z) for z in data.measurements]
+    identity = gtsam.Pose2() if dim == 2 else gtsam.Pose3()
+    for k, p in zip(anchors.tolist(), anchor_poses):
+        poses[k] = identity if np.isnan(p).any() else to_pose(dim, p)
+    for start in range(n):
+        if poses[start] is not None:
+            continue
+        chain = []
+        v = start
+        while v >= 0 and poses[v] is None:
+            chain.append(v)
+            v = parent[v]
+        base = identity if v < 0 else poses[v]
+        for u in reversed(chain):
+            if parent[u] < 0:
+                poses[u] = identity
+            else:
+                z = meas[parent_edge[u]]
+                base = base.compose(z if forward[u] else z.inverse())
+                poses[u] = base
+            base = poses[u]
+    out = np.zeros((n, POSE_WIDTH[dim]))
+    for k, p in enumerate(poses):
+        out[k] = from_pose(dim, p)
+    return out
+
+
+def lago_guess(graph: gtsam.NonlinearFactorGraph, n: int) -> np.ndarray:
+    """gtsam LAGO on a planar graph of Gaussian BetweenFactorPose2 plus a PriorFactorPose2 (required)."""
+    return array_from_values(2, gtsam.lago.initialize(graph), n)
+
+
+def chordal_guess(graph: gtsam.NonlinearFactorGraph, n: int) -> np.ndarray:
+    """gtsam chordal rotation relaxation + translation solve on a Pose3 graph with a prior."""
+    return array_from_values(3, gtsam.InitializePose3.initialize(graph), n)

@@ -1,0 +1,144 @@
+"""`PoseGraph`: build a graph node by node (odometry and loop closures marked explicitly), then optimise it."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from graph.formats import read_graph
+from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, information_from
+from graph.params import GraphParams, InitMethod, RobustMode, Solver
+from graph.result import GraphResult, write_g2o
+
+
+class PoseGraph:
+    """A batch pose graph (planar by default). Node ids are arbitrary ints; the first node is the anchor unless
+    `anchor()` names others.
+
+        g = PoseGraph()
+        g.add_node(0, [0, 0, 0]); g.add_node(1)               # a node without a guess is placed by odometry
+        g.add_odometry(0, 1, [1.0, 0.0, 0.1], cov)            # delta = pose 1 in the frame of pose 0
+        k = g.add_loop(1, 0, delta, cov, probability=0.97)    # -> loop index k
+        res = g.optimize()                                     # GraphResult: poses, res.loop_inlier[k], ...
+    """
+
+    def __init__(self, dim: int = 2, params: GraphParams | None = None):
+        if dim not in (2, 3):
+            raise ValueError(f"dim must be 2 or 3, got {dim}")
+        self.dim = dim
+        self.params = params or GraphParams.default()
+        self._ids: list[int] = []
+        self._index: dict[int, int] = {}
+        self._guess: list[np.ndarray] = []
+        self._from: list[int] = []
+        self._to: list[int] = []
+        self._z: list[np.ndarray] = []
+        self._info: list[np.ndarray] = []
+        self._loop: list[bool] = []
+        self._prob: list[float] = []
+        self._fixed: list[int] = []
+        self._loop_count = 0
+
+    @classmethod
+    def from_data(cls, data: PoseGraphData, params: GraphParams | None = None) -> "PoseGraph":
+        g = cls(data.dim, params)
+        for nid, p in zip(data.node_ids.tolist(), data.poses):
+            g.add_node(nid, None if np.isnan(p).any() else p)
+        for e in range(data.num_edges):
+            i, j = int(data.edge_from[e]), int(data.edge_to[e])
+            if data.is_loop[e]:
+                p = data.probability[e]
+                g.add_loop(i, j, data.measurements[e], information=data.information[e],
+                           probability=None if np.isnan(p) else float(p))
+            else:
+                g.add_odometry(i, j, data.measurements[e], information=data.information[e])
+        for nid in data.fixed.tolist():
+            g.anchor(nid)
+        return g
+
+    @classmethod
+    def read(cls, path: str | os.PathLike, params: GraphParams | None = None) -> "PoseGraph":
+        """A g2o or TORO file; loops are the edges between non-consecutive vertices (see graph.model)."""
+        return cls.from_data(read_graph(path), params)
+
+    # --------------------------------------------------------------------------------------------- building
+    def add_node(self, node_id: int, guess: np.ndarray | None = None) -> None:
+        node_id = int(node_id)
+        if node_id in self._index:
+            raise ValueError(f"node {node_id} already exists")
+        w = POSE_WIDTH[self.dim]
+        g = np.full(w, np.nan) if guess is None else np.asarray(guess, float).reshape(w)
+        if guess is not None and not np.all(np.isfinite(g)):
+            raise ValueError(f"node {node_id}: guess must be finite")
+        self._index[node_id] = len(self._ids)
+        self._ids.append(node_id)
+        self._guess.append(g)
+
+    def anchor(self, node_id: int) -> None:
+        """Hold this node at its guess (identity without one); by default the first node is the anchor."""
+        if int(node_id) not in self._index:
+            raise KeyError(f"unknown node id {int(node_id)}")
+        if int(node_id) not in self._fixed:
+            self._fixed.append(int(node_id))
+
+    def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None = None,
+                     information: np.ndarray | None = None) -> int:
+        """Odometry i -> j (trusted); cov or information in (x, y, theta) order (3D: x y z rx ry rz).
+        Returns the edge index."""
+        return self._add(i, j, delta, cov, information, False, float("nan"))
+
+    def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None = None,
+                 probability: float | None = None, information: np.ndarray | None = None) -> int:
+        """Loop closure i -> j from geometric verification, with P(loop) from the loop model (None: unknown).
+        Returns the loop index (0, 1, ... in the order added)."""
+        p = float("nan") if probability is None else float(probability)
+        if not (np.isnan(p) or 0.0 <= p <= 1.0):
+            raise ValueError(f"loop probability must be in [0, 1], got {p}")
+        self._add(i, j, delta, cov, information, True, p)
+        self._loop_count += 1
+        return self._loop_count - 1
+
+    def _add(self, i, j, delta, cov, information, is_loop, p) -> int:
+        for n in (i, j):
+            if int(n) not in self._index:
+                raise KeyError(f"unknown node id {int(n)}: add_node first")
+        if int(i) == int(j):
+            raise ValueError(f"edge from node {int(i)} to itself")
+        z = np.asarray(delta, float).reshape(POSE_WIDTH[self.dim])
+        if not np.all(np.isfinite(z)):
+            raise ValueError("delta must be finite")
+        self._from.append(int(i))
+        self._to.append(int(j))
+        self._z.append(z)
+        self._info.append(information_from(cov, information, TANGENT_DIM[self.dim]))
+        self._loop.append(is_loop)
+        self._prob.append(p)
+        return len(self._from) - 1
+
+    @property
+    def num_nodes(self) -> int:
+        return len(self._ids)
+
+    @property
+    def num_loops(self) -> int:
+        return self._loop_count
+
+    def to_data(self) -> PoseGraphData:
+        w, d = POSE_WIDTH[self.dim], TANGENT_DIM[self.dim]
+        lp = np.asarray(self._loop, bool)
+        return PoseGraphData(self.dim, np.asarray(self._ids, np.int64), np.asarray(self._guess).reshape(-1, w),
+                             self._from, self._to, np.asarray(self._z).reshape(-1, w),
+                             np.asarray(self._info).reshape(-1, d, d), lp,
+                             np.where(lp, np.asarray(self._prob, float), 1.0), np.asarray(self._fixed, np.int64))
+
+    # ---------------------------------------------------------------------------------------------- solving
+    def optimize(self, solver: Solver | str | None = None, robust: RobustMode | str | None = None,
+                 init: InitMethod | str | None = None) -> GraphResult:
+        """Solve with `params` (keyword arguments override solver / robust mode / initial guess)."""
+        from graph.batch import optimize
+
+        return optimize(self.to_data(), self.params, solver=solver, robust=robust, init=init)
+
+    def write_g2o(self, path: str | os.PathLike, result: GraphResult | None = None) -> None:
+        """The graph as g2o (TORO for *.graph), vertices at the result's poses when given."""
+        write_g2o(path, self.to_data(), result)
