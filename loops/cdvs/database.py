@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from loops.cdvs.codec import Descriptor
-from loops.cdvs.global_desc import global_scores_many
+from loops.cdvs.global_desc import absent_marks, global_scores_many, weight_lut
 from loops.cdvs.match import IncompatibleDescriptorsError, MatchResult, match
 from loops.cdvs.params import CdvsParams
 from loops.cdvs.trained import TrainedParams, load_trained
@@ -69,7 +69,8 @@ class LoopDatabase:
         else:
             self.min_overlap = float(getattr(model, "min_overlap", None) or 0.0)
         k = self.trained.n_clusters
-        self._vis = np.zeros((0, k), dtype=bool)
+        self._absent = np.zeros((0, k), dtype=np.uint8)   # absent_marks of each keyframe's visited clusters
+        self._lut = weight_lut(self.trained.global_weights)
         self._bits = np.zeros((0, k), dtype=np.uint32)
         self._nvis = np.zeros(0, dtype=np.float32)
         self._ids = np.zeros(0, dtype=np.int64)
@@ -82,7 +83,7 @@ class LoopDatabase:
 
     def _grow(self) -> None:
         cap = max(64, 2 * len(self._ids))
-        for name in ("_vis", "_bits", "_nvis", "_ids"):
+        for name in ("_absent", "_bits", "_nvis", "_ids"):
             old = getattr(self, name)
             new = np.zeros((cap,) + old.shape[1:], dtype=old.dtype)
             new[: self._n] = old[: self._n]
@@ -98,7 +99,7 @@ class LoopDatabase:
         if self._n == len(self._ids):
             self._grow()
         i = self._n
-        self._vis[i] = descriptor.global_visited
+        self._absent[i] = absent_marks(descriptor.global_visited)
         self._bits[i] = descriptor.global_bits
         self._nvis[i] = descriptor.global_visited.sum()
         self._ids[i] = frame_id
@@ -112,8 +113,8 @@ class LoopDatabase:
         w = self.trained.global_weights
         for s in range(0, n, _CHUNK):
             e = min(n, s + _CHUNK)
-            out[s:e] = global_scores_many(descriptor.global_visited, descriptor.global_bits, self._vis[s:e],
-                                          self._bits[s:e], self._nvis[s:e], w)
+            out[s:e] = global_scores_many(descriptor.global_visited, descriptor.global_bits, None, self._bits[s:e],
+                                          self._nvis[s:e], w, absent_db=self._absent[s:e], lut=self._lut)
         return out
 
     def query(self, descriptor: Descriptor, frame_id: int | None = None) -> list[Candidate]:

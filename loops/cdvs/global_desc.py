@@ -38,8 +38,10 @@ def cluster_signatures(desc: np.ndarray, trained: TrainedParams) -> tuple[np.nda
     counts = np.bincount(a, minlength=k)
     present = np.flatnonzero(counts)
     starts = np.concatenate([[0], np.cumsum(counts[present])[:-1]])
-    x = np.unpackbits(desc, axis=1).astype(np.float32)
-    sums = np.add.reduceat(x[rows[order]], starts, axis=0)          # (n_present, 256) bit sums per cluster
+    # bit sums per cluster (n_present, 256): unpack the gathered bytes bit-plane-major so the segmented sum runs
+    # along contiguous rows (exact integer sums; ~2x faster than a float reduceat over axis 0)
+    planes = np.unpackbits(np.ascontiguousarray(desc[rows[order]].T), axis=0)      # (256, 3N) uint8
+    sums = np.add.reduceat(planes, starts, axis=1, dtype=np.uint16).T.astype(np.float32)
     resid = sums - counts[present, None] * trained.cluster_mean[present]   # summed residuals
     y = cv2.gemm(resid.astype(np.float32), trained.projection, 1.0, None, 0.0)   # (n_present, 32), OpenCV threads
     weights = (np.uint32(1) << np.arange(GLOBAL_BITS, dtype=np.uint32))
@@ -73,13 +75,34 @@ def global_score(vis_a: np.ndarray, bits_a: np.ndarray, vis_b: np.ndarray, bits_
     return float(weights[h].sum() / np.sqrt(na * nb))
 
 
-def global_scores_many(vis_q: np.ndarray, bits_q: np.ndarray, vis_db: np.ndarray, bits_db: np.ndarray,
-                       n_db: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Global scores of one query against M stored descriptors: vis_db (M, K) bool, bits_db (M, K) uint32."""
+ABSENT = np.uint8(64)  # added to a Hamming distance (0..32) where a cluster is not visited: indexes a zero weight
+
+
+def absent_marks(visited: np.ndarray) -> np.ndarray:
+    """uint8 array, ABSENT where a cluster is not visited, 0 elsewhere (what a database stores per keyframe)."""
+    return np.where(visited, np.uint8(0), ABSENT).astype(np.uint8)
+
+
+def weight_lut(weights: np.ndarray) -> np.ndarray:
+    """T[h] as a 256-entry float32 table, zero from ABSENT on (cv2.LUT format)."""
+    lut = np.zeros((1, 256), dtype=np.float32)
+    lut[0, : len(weights)] = weights
+    return lut
+
+
+def global_scores_many(vis_q: np.ndarray, bits_q: np.ndarray, vis_db: np.ndarray | None, bits_db: np.ndarray,
+                       n_db: np.ndarray, weights: np.ndarray, absent_db: np.ndarray | None = None,
+                       lut: np.ndarray | None = None) -> np.ndarray:
+    """Global scores of one query against M stored descriptors: vis_db (M, K) bool, bits_db (M, K) uint32.
+
+    A database passes `absent_db` = absent_marks(vis_db) (and `lut` = weight_lut(weights)) kept from `add`: the
+    scan is then popcount, one OR, one table lookup (cv2.LUT) and a row sum, ~2.5x faster than gather + mask."""
     nq = int(vis_q.sum())
     if nq == 0 or len(bits_db) == 0:
         return np.zeros(len(bits_db))
-    h = np.bitwise_count(bits_db ^ bits_q[None, :])
-    t = weights[h]
-    t *= vis_db & vis_q[None, :]
-    return t.sum(axis=1, dtype=np.float32) / np.sqrt(np.maximum(n_db, 1) * nq)
+    h = np.bitwise_count(bits_db ^ bits_q[None, :])                  # (M, K) uint8 in 0..32
+    h |= absent_db if absent_db is not None else absent_marks(vis_db)
+    h |= absent_marks(vis_q)[None, :]
+    t = cv2.LUT(h, weight_lut(weights) if lut is None else lut)      # T[h], 0 where either side is absent
+    s = cv2.reduce(t, 1, cv2.REDUCE_SUM).ravel()
+    return s / np.sqrt(np.maximum(n_db, 1) * nq)

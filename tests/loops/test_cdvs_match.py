@@ -174,3 +174,20 @@ def test_two_way_union_matches_the_reference_definition():
     got = {(int(x), int(y)): float(v) for x, y, v in zip(ia, ib, w)}
     assert got.keys() == ref.keys() and len(got) == len(ia) > 20
     assert all(abs(got[k] - ref[k]) < 1e-9 for k in ref)
+
+
+def test_database_global_scan_equals_the_pairwise_global_score():
+    """The table-lookup scan (absent clusters marked, cv2.LUT) gives the same scores as global_score pair by pair."""
+    from loops.cdvs.global_desc import absent_marks, global_score, global_scores_many, weight_lut
+
+    rng = np.random.default_rng(5)
+    k = 64
+    vis = rng.random((50, k)) < 0.6
+    bits = np.where(vis, rng.integers(0, 2 ** 32, size=(50, k), dtype=np.uint64), 0).astype(np.uint32)
+    w = rng.standard_normal(33).astype(np.float32)
+    vis[3] = False                                   # a keyframe with no visited cluster scores 0
+    for q in range(5):
+        fast = global_scores_many(vis[q], bits[q], None, bits, vis.sum(axis=1), w, absent_db=absent_marks(vis),
+                                  lut=weight_lut(w))
+        ref = [global_score(vis[q], bits[q], vis[i], bits[i], w) for i in range(len(bits))]
+        assert np.allclose(fast, ref, atol=1e-5)
