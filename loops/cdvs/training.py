@@ -9,7 +9,7 @@ shift), noise and contrast changes, so the keypoint correspondences are known ex
 
 Learned: (1) relevance tables P(correctly matched | response, level, radius) for feature selection, (2) the
 priority order of the 256 ORB bits (discriminative gap between matching and random pairs, decorrelated greedily),
-(3) a 128-word binary codebook (k-majority), per-cluster bit means and a 32-D PCA of the residuals for the global
+(3) a 64-word binary codebook (k-majority), per-cluster bit means and a 32-D PCA of the residuals for the global
 descriptor, (4) the global-score weights T[h], (5) per-mode pair decision thresholds: the highest local and global
 scores seen on different-scene training pairs involving a real photograph, times a safety margin.
 """

@@ -191,3 +191,24 @@ def test_database_global_scan_equals_the_pairwise_global_score():
                                   lut=weight_lut(w))
         ref = [global_score(vis[q], bits[q], vis[i], bits[i], w) for i in range(len(bits))]
         assert np.allclose(fast, ref, atol=1e-5)
+
+
+def test_transform_overlap_equals_the_polygon_intersection():
+    """The convex clipping used for the overlap gate agrees with a shapely intersection over union, including
+    mirrored maps, disjoint views and a view inside the other."""
+    import shapely
+
+    from loops.cdvs.geometry import transform_overlap
+
+    rng = np.random.default_rng(3)
+    for t in range(300):
+        A = rng.normal(size=(2, 2)) * 0.5 + np.eye(2) * rng.uniform(0.3, 2.0)
+        b = rng.uniform(-700, 700, 2) if t % 3 else rng.uniform(0, 50, 2)
+        sa, sb = (int(rng.integers(100, 1300)), int(rng.integers(100, 900))), (640, 480)
+        quad = np.array([[0, 0], [sa[0], 0], [sa[0], sa[1]], [0, sa[1]]], float) @ A.T + b
+        pa, pb = shapely.Polygon(quad), shapely.box(0, 0, *sb)
+        inter = shapely.intersection(pa, pb).area
+        expect = inter / (pa.area + pb.area - inter)
+        assert transform_overlap(lambda x: x @ A.T + b, sa, sb) == pytest.approx(expect, abs=1e-9)
+    assert transform_overlap(lambda x: x + 1000.0, (640, 480), (640, 480)) == 0.0
+    assert transform_overlap(lambda x: 0.5 * x + 10.0, (640, 480), (640, 480)) == pytest.approx(0.25)
