@@ -268,15 +268,15 @@ def run(a: argparse.Namespace) -> int:
                  *[f"~{sift_stats['match_ms'] * n / 1000:.0f} s (linear scan)" for n in sizes_db], "1x", "1x", "1x"])
     t1 = format_table(head, rows)
     names = list(loops_pr)
-    head2 = ["mode", *[f"{f} P / R (wrong place)" for f in names], "threshold"]
+    head2 = ["mode", *[f"{f} P / R (false / wrong place)" for f in names], "threshold"]
     rows2 = []
     for m in MODES:
         cells = []
         for f in names:
             pr = loops_pr[f][m]
-            prec = pr["precision"]
-            cells.append(f"{'-' if prec != prec else f'{100 * prec:.0f}%'} / {100 * pr['recall']:.0f}% "
-                         f"({pr['wrong_place']})")
+            prec = pr["precision"]   # one decimal below 100 %: a single false loop must not round away
+            ptxt = "-" if prec != prec else ("100%" if pr["false_positives"] == 0 else f"{100 * prec:.1f}%")
+            cells.append(f"{ptxt} / {100 * pr['recall']:.0f}% ({pr['false_positives']} / {pr['wrong_place']})")
         rows2.append([m, *cells, f"{model.threshold(m):.3g}"])
     t2 = format_table(head2, rows2)
     t3 = ""
@@ -289,7 +289,8 @@ def run(a: argparse.Namespace) -> int:
                   f"{CDVS_REFERENCE[m][2] / r['extract_ms_mean']:.1f}x"] for m, r in real.items()]
         t3 = format_table(head3, rows3)
     text = ("### Size and speed (simulated 640x480 floors, single-threaded)\n\n" + t1 +
-            "\n\n### Loops at the learned thresholds (precision / recall over queries, wrong-place loops)\n\n" + t2 +
+            "\n\n### Loops at the learned thresholds (precision / recall over queries; false loops / wrong-place "
+            "loops)\n\n" + t2 +
             ("\n\n### 48 real pairs (../shared/data/pairs)\n\n" + t3 if t3 else "") + "\n")
     print(text)
     result.update({"modes": per_mode, "sift": sift_stats, "loops": loops_pr, "real_pairs": real,
