@@ -4,12 +4,17 @@
 - `odometry.poses`: planar pose composition and TUM conversions.
 - `odometry.footprint`: image footprints on the floor and their overlap J.
 - `odometry.fusion`: wheel odometry + gyro EKF (filterpy) -> poses, covariances, relative motions.
+- `odometry.vo`: downward-camera visual odometry (`VisualOdometry`, `run_visual_odometry`), built on
+  `odometry.rigid` (Kabsch/SVD + RANSAC), `odometry.tilt_refine` and `odometry.tracking` (LK front end).
 """
 from odometry.camera import CameraModel
 from odometry.footprint import footprint_overlap, footprint_polygon, overlap_matrix, overlap_pairs
 from odometry.fusion import FusedTrajectory, FusionConfig, fuse_wheel_gyro
 from odometry.poses import between, compose, integrate, inverse, relative_motions, wrap_angle
+from odometry.rigid import RigidFit, kabsch_2d, ransac_rigid_2d
+from odometry.vo import VOConfig, VOEstimate, VOStatus, VOTrajectory, VisualOdometry, run_visual_odometry
 
-__all__ = ["CameraModel", "FusedTrajectory", "FusionConfig", "between", "compose", "footprint_overlap",
-           "footprint_polygon", "fuse_wheel_gyro", "integrate", "inverse", "overlap_matrix", "overlap_pairs",
-           "relative_motions", "wrap_angle"]
+__all__ = ["CameraModel", "FusedTrajectory", "FusionConfig", "RigidFit", "VOConfig", "VOEstimate", "VOStatus",
+           "VOTrajectory", "VisualOdometry", "between", "compose", "footprint_overlap", "footprint_polygon",
+           "fuse_wheel_gyro", "integrate", "inverse", "kabsch_2d", "overlap_matrix", "overlap_pairs",
+           "ransac_rigid_2d", "relative_motions", "run_visual_odometry", "wrap_angle"]

@@ -22,6 +22,14 @@ from odometry.poses import rot2
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-12)
 
 
+def tilt_matrix(roll: float, pitch: float) -> np.ndarray:
+    """Rotation of the viewing rays for a camera tilted by roll (about its x axis) then pitch (about its y axis)."""
+    cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    return ry @ rx
+
+
 @dataclass(frozen=True)
 class CameraModel:
     """Pinhole camera with radial-tangential distortion (OpenCV order k1 k2 p1 p2 k3).
@@ -129,11 +137,7 @@ class CameraModel:
 
     # ------------------------------------------------------------------ floor plane
     def _tilt_matrix(self) -> np.ndarray:
-        roll, pitch = self.tilt
-        cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
-        rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-        ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-        return ry @ rx
+        return tilt_matrix(*self.tilt)
 
     def _require_height(self) -> float:
         if self.camera_height is None:
@@ -153,6 +157,31 @@ class CameraModel:
             cam = d[:, :2] * (h / d[:, 2:3])
         # camera FRD (x forward, y right) -> base (x forward, y left), then the mount
         local = np.column_stack([cam[:, 0], -cam[:, 1]])
+        mx, my, myaw = self.mount
+        if myaw != 0.0:
+            local = local @ rot2(myaw).T
+        return local + np.array([mx, my])
+
+    def rays_to_floor_batch(self, xn: np.ndarray, heights: np.ndarray, tilts: np.ndarray) -> np.ndarray:
+        """Floor points (K, N, 2) of rays xn (N, 2) for K hypotheses of camera height (K,) and tilt (K, 2).
+
+        The same mapping as `rays_to_floor` with `camera_height` and `tilt` replaced, vectorised over the
+        hypotheses: what an estimator of the camera's momentary height and tilt needs (robots pitch and bounce).
+        """
+        xn = np.asarray(xn, dtype=np.float64).reshape(-1, 2)
+        heights = np.asarray(heights, dtype=np.float64).reshape(-1)
+        tilts = np.asarray(tilts, dtype=np.float64).reshape(-1, 2)
+        cr, sr = np.cos(tilts[:, 0]), np.sin(tilts[:, 0])
+        cp, sp = np.cos(tilts[:, 1]), np.sin(tilts[:, 1])
+        z = np.zeros_like(cr)
+        # tilt_matrix(roll, pitch) = Ry(pitch) Rx(roll), for all hypotheses at once
+        rots = np.stack([np.stack([cp, sp * sr, sp * cr], -1), np.stack([z, cr, -sr], -1),
+                         np.stack([-sp, cp * sr, cp * cr], -1)], -2)                  # (K, 3, 3)
+        d = np.column_stack([xn, np.ones(len(xn))]) @ np.swapaxes(rots, 1, 2)        # (K, N, 3)
+        if np.any(d[..., 2] <= 1e-9):
+            raise ValueError("a viewing ray does not meet the floor (tilt too large)")
+        cam = d[..., :2] * (heights[:, None, None] / d[..., 2:3])
+        local = np.stack([cam[..., 0], -cam[..., 1]], -1)
         mx, my, myaw = self.mount
         if myaw != 0.0:
             local = local @ rot2(myaw).T

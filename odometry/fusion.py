@@ -1,10 +1,13 @@
 """Wheel odometry + gyro fusion: an extended Kalman filter (filterpy) over the planar pose and the gyro bias.
 
-State x = [x, y, theta, b, s]: robot pose in the frame of the first query time, the gyro's additive yaw-rate
-bias b (rad/s), and the relative scale error s of the wheel yaw rate (wheel-base error: a few per cent on real
-robots; left uncorrected it would leak into the bias estimate in every turn). Sensors, each at its own times:
+State x = [x, y, theta, b, s, k]: robot pose in the frame of the first query time, the gyro's additive yaw-rate
+bias b (rad/s), the relative scale error s of the wheel yaw rate (wheel-base error: a few per cent on real
+robots; left uncorrected it would leak into the bias estimate in every turn), and the relative scale error k of
+the wheel speed (wheel radius). k is not observable from these sensors: it stays at its prior mean, but its
+prior makes the position covariance grow with distance the way a scale error does (linearly, not as a random
+walk), so long-range covariances stay honest. Sensors, each at its own times:
 
-- wheel speed v (m/s, forward): the translational input of the unicycle model;
+- wheel speed v = (1 + k) v_true + n_v (m/s, forward): the translational input of the unicycle model;
 - wheel yaw rate omega_w = (1 + s) omega + n_w (differential encoders; slip and wheel-base error);
 - gyro yaw rate omega_g = omega + b + n_g.
 
@@ -18,9 +21,9 @@ and their noises are uncorrelated, so each piece of information is used once. Wi
 (wheel-only, or gyro + wheel speed) alpha is 0 or 1 and there is no update: b and s keep their priors and the
 heading uncertainty grows accordingly, which is honest.
 
-Time: the wheel, gyro and query timestamps are merged; over each interval the rates are taken at the interval
-midpoint by linear interpolation of each stream and the unicycle is integrated exactly (constant-curvature arc).
-Noise-free inputs therefore reproduce the exact integral of the interpolated rates.
+Time: the wheel, gyro and query timestamps are merged and the unicycle is integrated exactly over each interval
+(constant-curvature arc). A sample holds until the next one (the sequence format's convention, `Interpolation.HOLD`)
+or rates are interpolated linearly (`Interpolation.LINEAR`). Noise-free inputs reproduce the exact integral.
 
 Noise parameters are per-sample standard deviations (what a data sheet or a log gives); they are turned into
 densities with each stream's median sampling period, so the result does not depend on how the timeline is cut.
@@ -34,12 +37,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, fields, replace
+from enum import Enum
 
 import numpy as np
 
+from odometry.pose_cov import between_jacobians
 from odometry.poses import between, wrap_angle
 
-__all__ = ["FusionConfig", "FusedTrajectory", "fuse_wheel_gyro", "relative_jacobians"]
+__all__ = ["FusionConfig", "FusedTrajectory", "Interpolation", "fuse_wheel_gyro"]
+
+
+class Interpolation(str, Enum):
+    """How a sampled rate is read between samples."""
+
+    HOLD = "hold"      # each sample holds until the next (odometry.csv / imu.csv convention)
+    LINEAR = "linear"  # linear between samples
 
 
 @dataclass(frozen=True)
@@ -59,6 +71,8 @@ class FusionConfig:
         wheel_scale_sigma0: prior standard deviation of the wheel yaw-rate scale error s (prior mean 0);
             0 disables its estimation.
         wheel_scale_walk: random walk of s per sqrt(m) travelled (floor changes alter the effective wheel base).
+        speed_scale_sigma0: prior standard deviation of the wheel speed scale error k (wheel radius, tyre wear).
+        interpolation: how rates are read between samples (HOLD: the sequence format's convention).
         bias_gate: chi-square (1 dof) gate on the bias innovation; larger disagreements between gyro and wheel
             yaw rates are slip, not bias, and are not used to update the bias. 0 disables the gate.
         max_gap: a stream with a sample gap longer than this (s) is treated as missing over the whole gap.
@@ -74,17 +88,22 @@ class FusionConfig:
     slip_heading: float = 0.01
     gyro_bias_sigma0: float = 0.02
     gyro_bias0: float = 0.0
-    gyro_bias_walk: float = 1e-4
+    gyro_bias_walk: float = 2e-4
     wheel_scale_sigma0: float = 0.05
     wheel_scale_walk: float = 1e-3
+    speed_scale_sigma0: float = 0.02
+    interpolation: Interpolation = Interpolation.HOLD
     bias_gate: float = 10.83  # chi2(1) at 99.9 %
     max_gap: float = 0.5
     gap_speed_sigma: float = 0.5
     gap_rate_sigma: float = 0.5
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "interpolation", Interpolation(self.interpolation))
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name == "interpolation":
+                continue
             if not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ValueError(f"FusionConfig.{f.name} must be a finite number, got {v!r}")
             if f.name != "gyro_bias0" and v < 0:
@@ -118,7 +137,9 @@ class FusionConfig:
         return presets[name]()
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d["interpolation"] = self.interpolation.value
+        return d
 
     @classmethod
     def from_dict(cls, d: dict, base: "FusionConfig | None" = None) -> "FusionConfig":
@@ -127,16 +148,8 @@ class FusionConfig:
         unknown = sorted(set(d) - names)
         if unknown:
             raise ValueError(f"unknown FusionConfig field(s): {', '.join(unknown)}")
-        return replace(base or cls.default(), **{k: float(v) for k, v in d.items()})
-
-
-def relative_jacobians(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Jacobians of between(a, b) with respect to the poses a and b (each 3x3)."""
-    d = between(a, b)
-    c, s = math.cos(a[2]), math.sin(a[2])
-    ja = np.array([[-c, -s, d[1]], [s, -c, -d[0]], [0.0, 0.0, -1.0]])
-    jb = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    return ja, jb
+        return replace(base or cls.default(),
+                       **{k: (Interpolation(v) if k == "interpolation" else float(v)) for k, v in d.items()})
 
 
 @dataclass
@@ -149,9 +162,9 @@ class FusedTrajectory:
         covariances: (M, 3, 3) marginal covariance of each pose.
         bias: (M,) estimated gyro bias (rad/s) at each query time (NaN without a gyro).
         bias_sigma: (M,) its standard deviation.
-        transitions: (M, 5, 5) error transition of the full state [x, y, theta, b, s] from query i-1 to query
+        transitions: (M, 6, 6) error transition of the full state [x, y, theta, b, s, k] from query i-1 to query
             i (identity for i = 0), used for the cross-covariances of `relative`.
-        state_covariances: (M, 5, 5) full state covariance at each query time.
+        state_covariances: (M, 6, 6) full state covariance at each query time.
         wheel_scale: (M,) estimated wheel yaw-rate scale error s (NaN unless both rate sources are given).
     """
 
@@ -191,7 +204,7 @@ class FusedTrajectory:
             return np.zeros(3), np.zeros((3, 3))
         a, b = min(i, j), max(i, j)
         d = between(self.poses[i], self.poses[j])
-        ji, jj = relative_jacobians(self.poses[i], self.poses[j])
+        ji, jj = between_jacobians(self.poses[i], self.poses[j])
         if self.transitions is None or self.state_covariances is None:
             # marginals only: an upper bound that ignores the positive correlation of the two poses
             cov = ji @ self.covariances[i] @ ji.T + jj @ self.covariances[j] @ jj.T
@@ -253,7 +266,7 @@ def _gap_span(t: np.ndarray, at: np.ndarray) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------------- the filter
 
-_DIM = 5  # x, y, theta, gyro bias, wheel-rate scale error
+_DIM = 6  # x, y, theta, gyro bias, wheel-rate scale error, wheel-speed scale error
 
 
 def _make_ekf(cfg: FusionConfig):
@@ -267,15 +280,16 @@ def _make_ekf(cfg: FusionConfig):
             x = self.x
             w = (1.0 - alpha) * om_w / (1.0 + x[4, 0]) + alpha * (om_g - x[3, 0])
             half = 0.5 * w * dt
-            chord = v * dt * (math.sin(half) / half if abs(half) > 1e-9 else 1.0 - half * half / 6.0)
+            chord = v / (1.0 + x[5, 0]) * dt * (math.sin(half) / half if abs(half) > 1e-9 else 1.0 - half * half / 6.0)
             phi = x[2, 0] + half
             x[0, 0] += chord * math.cos(phi)
             x[1, 0] += chord * math.sin(phi)
             x[2, 0] = wrap_angle(x[2, 0] + w * dt)
 
     ekf = _PlanarEKF(dim_x=_DIM, dim_z=1)
-    ekf.x = np.array([[0.0], [0.0], [0.0], [cfg.gyro_bias0], [0.0]])
-    ekf.P = np.diag([0.0, 0.0, 0.0, cfg.gyro_bias_sigma0 ** 2, cfg.wheel_scale_sigma0 ** 2])
+    ekf.x = np.array([[0.0], [0.0], [0.0], [cfg.gyro_bias0], [0.0], [0.0]])
+    ekf.P = np.diag([0.0, 0.0, 0.0, cfg.gyro_bias_sigma0 ** 2, cfg.wheel_scale_sigma0 ** 2,
+                     cfg.speed_scale_sigma0 ** 2])
     return ekf
 
 
@@ -334,8 +348,13 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
 
     # per-interval rates and the variances of their interval averages: white noise of a sample sigma at period T
     # integrates to sigma^2 T dt, slip to k^2 |v| dt; divided by dt^2 for a rate
+    def read(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        if cfg.interpolation == Interpolation.LINEAR:
+            return np.interp(mids, t, x)
+        return x[np.clip(np.searchsorted(t, mids, side="right") - 1, 0, len(t) - 1)]
+
     period_w = _period(wt)
-    v_mid = np.interp(mids, wt, wv)
+    v_mid = read(wt, wv)
     w_stale = _gap_span(wt, mids) > cfg.max_gap
     dist_rate = np.abs(v_mid)  # m/s, for the slip terms
     var_v = (cfg.wheel_v_sigma ** 2 * period_w + cfg.slip_forward ** 2 * dist_rate) / dts
@@ -344,7 +363,7 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
     lat_var = cfg.slip_lateral ** 2 * dist_rate * dts  # sideways position variance of the step (m^2)
     big = np.inf
     if ww is not None:
-        om_w = np.interp(mids, wt, ww)
+        om_w = read(wt, ww)
         var_w = (cfg.wheel_omega_sigma ** 2 * period_w + cfg.slip_heading ** 2 * dist_rate) / dts
         var_w = np.where(w_stale, big, var_w)
     else:
@@ -352,7 +371,7 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
         var_w = np.full_like(mids, big)
     if gyro is not None:
         gt, gz = gyro
-        om_g = np.interp(mids, gt, gz)
+        om_g = read(gt, gz)
         var_g = cfg.gyro_sigma ** 2 * _period(gt) / dts
         var_g = np.where(_gap_span(gt, mids) > cfg.max_gap, big, var_g)
     else:
@@ -375,17 +394,18 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
     extra = np.zeros((m, 2))  # b, s
     phi = eye.copy()
     qi = 0
-    pcov[0], extra[0] = ekf.P, ekf.x[3:, 0]
+    pcov[0], extra[0] = ekf.P, ekf.x[3:5, 0]
     while qi + 1 < m and qidx[qi + 1] == 0:  # repeated first query time
         qi += 1
-        pcov[qi], extra[qi] = ekf.P, ekf.x[3:, 0]
+        pcov[qi], extra[qi] = ekf.P, ekf.x[3:5, 0]
     F = np.eye(_DIM)
     Q = np.zeros((_DIM, _DIM))
     H = np.zeros((1, _DIM))
     z0 = np.zeros((1, 1))
     for k in range(len(dts)):
-        dt, vk = dts[k], v_mid[k]
-        th, b, sc = ekf.x[2, 0], ekf.x[3, 0], ekf.x[4, 0]
+        dt = dts[k]
+        th, b, sc, kv = ekf.x[2, 0], ekf.x[3, 0], ekf.x[4, 0], ekf.x[5, 0]
+        vk = v_mid[k] / (1.0 + kv)
         inv1s = 1.0 / (1.0 + sc)
         wc = om_w[k] * inv1s  # wheel rate corrected for the scale error
         if has_w[k] and has_g[k]:
@@ -409,6 +429,7 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
         F[0, 2], F[1, 2] = -chord * sph, chord * cph
         F[0, 3], F[1, 3], F[2, 3] = perp_x * dw_db, perp_y * dw_db, dt * dw_db
         F[0, 4], F[1, 4], F[2, 4] = perp_x * dw_ds, perp_y * dw_ds, dt * dw_ds
+        F[0, 5], F[1, 5] = -chord * cph / (1.0 + kv), -chord * sph / (1.0 + kv)
         # noise: speed error along the chord, rate error turns heading and chord, lateral slip across it
         g_v = np.array([dt * cph, dt * sph, 0.0])
         g_w = np.array([perp_x, perp_y, dt])
@@ -417,7 +438,7 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
         Q[3, 3] = walk_b2 * dt
         Q[4, 4] = walk_s2 * dist_rate[k] * dt
         ekf.F, ekf.Q = F, Q
-        ekf.predict(u=(vk, om_w[k], om_g[k], al, dt))
+        ekf.predict(u=(v_mid[k], om_w[k], om_g[k], al, dt))
         phi = F @ phi
         if has_w[k] and has_g[k]:
             # implicit measurement 0 = omega_w - (1 + s)(omega_g - b) + noise. The gyro rate is the regressor of s
@@ -436,7 +457,7 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
             poses[qi] = ekf.x[:3, 0]
             pcov[qi] = ekf.P
             trans[qi] = phi
-            extra[qi] = ekf.x[3:, 0]
+            extra[qi] = ekf.x[3:5, 0]
             phi = eye.copy()
     pcov = 0.5 * (pcov + np.swapaxes(pcov, 1, 2))
     nan = np.full(m, np.nan)

@@ -6,10 +6,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from odometry.fusion import FusionConfig, fuse_wheel_gyro
+from odometry.fusion import FusionConfig, Interpolation, fuse_wheel_gyro
 from odometry.poses import between, compose, integrate, wrap_angle
 
 WHEEL_DT, GYRO_DT, FRAME_DT = 0.02, 0.01, 0.1
+# the streams below sample continuous rates on two different clocks: read them linearly
+LIN = FusionConfig(interpolation=Interpolation.LINEAR)
 
 
 def _rates(t):
@@ -62,10 +64,32 @@ def test_noise_free_constant_rates_reproduce_the_exact_arc(mode):
     assert np.all(np.diff([np.trace(c) for c in f.covariances]) >= -1e-15)  # dead reckoning only grows
 
 
-def test_noise_free_varying_rates_match_a_fine_integral():
+def _arcs(v, w, dt):
+    """Exact unicycle steps for rates held constant over dt."""
+    th = w * dt
+    small = np.abs(th) < 1e-12
+    r = np.where(small, 0.0, v / np.where(small, 1.0, w))
+    dx = np.where(small, v * dt, r * np.sin(th))
+    dy = np.where(small, 0.0, r * (1 - np.cos(th)))
+    return np.column_stack([dx, dy, th])
+
+
+def test_noise_free_held_rates_reproduce_the_exact_integral():
+    """The sequence-format convention (a sample holds until the next): exact to rounding, like the simulator."""
+    t = np.arange(1000) * 0.01
+    v, w = _rates(t)
+    truth = integrate(_arcs(v[:-1], w[:-1], 0.01))
+    q = t[::7]
+    f = fuse_wheel_gyro(t, v, w, t, w, q)
+    assert np.abs(_err(f.poses, truth[::7])).max() < 1e-9
+    assert abs(f.bias[-1]) < 1e-12 and abs(f.wheel_scale[-1]) < 1e-12
+
+
+def test_noise_free_linear_rates_match_a_fine_integral():
     q = np.arange(0.0, 20.0, FRAME_DT)
     tw, v, w, tg, wg = _streams(20.5)
-    f = fuse_wheel_gyro(tw, v, w, tg, wg, q)
+    cfg = FusionConfig(interpolation=Interpolation.LINEAR)
+    f = fuse_wheel_gyro(tw, v, w, tg, wg, q, cfg)
     assert np.abs(_err(f.poses, _truth(20.5, q))).max() < 2e-4  # interpolation error of 50 Hz rates only
     assert abs(f.bias[-1]) < 1e-6 and abs(f.wheel_scale[-1]) < 1e-5
 
@@ -77,12 +101,12 @@ def test_noisy_gyro_bias_and_wheel_scale_are_estimated_and_beat_dead_reckoning()
     bias, scale = 0.015, 0.04
     tw, v, w, tg, wg = _streams(duration, rng, bias=bias, scale=scale)
     truth = _truth(duration, q)
-    fused = fuse_wheel_gyro(tw, v, w, tg, wg, q)
-    wheel = fuse_wheel_gyro(tw, v, w, None, None, q)
-    gyro_raw = fuse_wheel_gyro(tw, v, None, tg, wg, q)  # gyro + wheel speed, bias not observable
+    fused = fuse_wheel_gyro(tw, v, w, tg, wg, q, LIN)
+    wheel = fuse_wheel_gyro(tw, v, w, None, None, q, LIN)
+    gyro_raw = fuse_wheel_gyro(tw, v, None, tg, wg, q, LIN)  # gyro + wheel speed, bias not observable
 
     assert abs(fused.bias[-1] - bias) < max(3 * fused.bias_sigma[-1], 1e-3)
-    assert fused.bias_sigma[-1] < 0.2 * FusionConfig.default().gyro_bias_sigma0
+    assert fused.bias_sigma[-1] < 0.2 * LIN.gyro_bias_sigma0
     assert abs(fused.wheel_scale[-1] - scale) < 0.01
     e_f, e_w, e_g = (_err(x.poses, truth) for x in (fused, wheel, gyro_raw))
     rms = lambda e, c: float(np.sqrt(np.mean(e[:, c] ** 2)))  # noqa: E731
@@ -97,7 +121,7 @@ def test_noisy_gyro_bias_and_wheel_scale_are_estimated_and_beat_dead_reckoning()
 def test_covariances_are_consistent_monte_carlo():
     """Mean NEES of the final pose and of a 3 s relative motion is ~3 when the noise matches the model."""
     cfg = FusionConfig(slip_forward=0.0, slip_lateral=0.0, slip_heading=0.0, wheel_scale_walk=0.0,
-                       gyro_bias_walk=0.0)
+                       gyro_bias_walk=0.0, speed_scale_sigma0=0.0, interpolation=Interpolation.LINEAR)
     duration = 10.0
     q = np.arange(0.0, 9.6, FRAME_DT)
     truth = _truth(duration, q)
@@ -119,7 +143,7 @@ def test_covariances_are_consistent_monte_carlo():
 def test_relative_motion_and_its_covariance():
     rng = np.random.default_rng(3)
     q = np.arange(0.0, 15.0, FRAME_DT)
-    f = fuse_wheel_gyro(*_streams(15.5, rng), q)
+    f = fuse_wheel_gyro(*_streams(15.5, rng), q, LIN)
     d, c = f.relative(100, 110)
     assert np.allclose(compose(f.poses[100], d), f.poses[110])
     # relative motion is much better known than the difference of two drifted absolute poses
@@ -142,9 +166,9 @@ def test_relative_motion_and_its_covariance():
 def test_a_sensor_gap_inflates_the_covariance_but_keeps_going():
     q = np.arange(0.0, 10.0, FRAME_DT)
     tw, v, w, tg, wg = _streams(10.5)
-    full = fuse_wheel_gyro(tw, v, w, tg, wg, q)
+    full = fuse_wheel_gyro(tw, v, w, tg, wg, q, LIN)
     keep = (tw < 4.0) | (tw > 6.0)
-    gap = fuse_wheel_gyro(tw[keep], v[keep], w[keep], tg, wg, q)
+    gap = fuse_wheel_gyro(tw[keep], v[keep], w[keep], tg, wg, q, LIN)
     assert np.all(np.isfinite(gap.poses))
     k = 65  # after the gap
     assert gap.covariances[k][0, 0] + gap.covariances[k][1, 1] > 10 * (full.covariances[k][0, 0]
@@ -160,9 +184,9 @@ def test_slip_spikes_do_not_corrupt_the_bias():
     w = w.copy()
     spikes = rng.choice(len(w), 40, replace=False)
     w[spikes] += rng.choice([-1.0, 1.0], 40) * 2.0  # a wheel spinning on a slippery patch
-    f = fuse_wheel_gyro(tw, v, w, tg, wg, q)
+    f = fuse_wheel_gyro(tw, v, w, tg, wg, q, LIN)
     assert abs(f.bias[-1] - 0.01) < 3e-3
-    ungated = fuse_wheel_gyro(tw, v, w, tg, wg, q, dataclasses.replace(FusionConfig.default(), bias_gate=0.0))
+    ungated = fuse_wheel_gyro(tw, v, w, tg, wg, q, dataclasses.replace(LIN, bias_gate=0.0))
     assert abs(f.bias[-1] - 0.01) < abs(ungated.bias[-1] - 0.01)
 
 

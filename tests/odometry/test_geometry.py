@@ -139,3 +139,21 @@ def test_read_tum_reports_line(tmp_path):
     f.write_text("0 0 0 nan 0 0 0 1\n")
     with pytest.raises(TumFormatError, match=r"bad.txt:1: NaN"):
         read_tum(f)
+
+
+def test_atomic_write_permissions_and_no_partial_file(tmp_path):
+    import os
+    import stat
+
+    from odometry.atomic_io import atomic_path, atomic_write_text
+
+    f = tmp_path / "out.txt"
+    atomic_write_text(f, "hello\n")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(f.stat().st_mode) == 0o666 & ~umask
+    with pytest.raises(RuntimeError):
+        with atomic_path(f) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("crash while writing")
+    assert f.read_text() == "hello\n" and sorted(p.name for p in tmp_path.iterdir()) == ["out.txt"]

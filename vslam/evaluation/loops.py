@@ -61,7 +61,8 @@ def loop_precision_recall(camera: CameraModel, gt_poses: np.ndarray, loops: Loop
     """Precision of the reported loops and recall over the queries that had a true loop.
 
     gt_poses: (N, 3) planar ground truth per frame. queried: frame indices that were queried for loops (keyframes);
-    a query counts as a positive when some earlier queried frame at least `min_separation` frames back has J >= r.
+    a query counts as a positive when some queried frame at least `min_separation` queries earlier has J >= r
+    (the detector's own exclusion of recent keyframes, so neighbours in time are not counted as missed loops).
     use_inliers: judge the loops kept by the back end (accepted and inlier) instead of all accepted ones.
     """
     keep = loops.accepted & (loops.inlier if (use_inliers and loops.inlier is not None) else True)
@@ -81,9 +82,9 @@ def loop_precision_recall(camera: CameraModel, gt_poses: np.ndarray, loops: Loop
         Jm = np.zeros((len(queried), len(queried)))
         if ok.sum() > 1:
             Jm[np.ix_(ok, ok)] = overlap_matrix(camera, P[ok])
-        sep = np.abs(queried[:, None] - queried[None, :]) >= min_separation
-        earlier = queried[None, :] < queried[:, None]
-        positive = np.any((Jm >= r) & sep & earlier, axis=1)
+        rank = np.arange(len(queried))
+        earlier = (rank[:, None] - rank[None, :]) >= max(1, min_separation)
+        positive = np.any((Jm >= r) & earlier, axis=1)
         hit_queries = set(int(a) for a, jj in zip(q[valid], J) if jj >= r)
         found = np.array([int(f) in hit_queries for f in queried])
         out.update({"queries": int(len(queried)), "positive_queries": int(positive.sum()),

@@ -96,13 +96,12 @@ def _loop_segments(out: Path, loops) -> dict:
     """Loop edges drawn on the (unaligned) SLAM trajectory, by frame index."""
     t, est = read_tum(out / "trajectory_slam.txt")
     p = est[:, :2]
-    segs = {"accepted": [], "outlier": [], "rejected": []}
+    segs = {"accepted": [], "outlier": []}   # candidates below threshold would only clutter the map
     for q, m, acc, inl in zip(loops.query, loops.match, loops.accepted,
                               loops.inlier if loops.inlier is not None else [True] * len(loops)):
-        if q >= len(p) or m >= len(p):
+        if q >= len(p) or m >= len(p) or not acc:
             continue
-        kind = "rejected" if not acc else ("accepted" if inl else "outlier")
-        segs[kind].append((p[q], p[m]))
+        segs["accepted" if inl else "outlier"].append((p[q], p[m]))
     return segs
 
 

@@ -116,16 +116,18 @@ def write_camera_yaml(path: str | os.PathLike, camera: CameraModel) -> None:
     atomic_write_text(path, camera_yaml_text(camera))
 
 
-def read_sequence_dir(root: str | os.PathLike, check_images: str = "exists") -> Sequence:
+def read_sequence_dir(root: str | os.PathLike, check_images: str = "exists", require_camera: bool = True) -> Sequence:
     """Read and validate a sequence directory.
 
     check_images: "none" (trust frames.csv), "exists" (every image file exists; default) or "decode"
     (decode every image: slow, finds corrupt files up front).
+    require_camera: False for uses that need no calibration (place recognition): a missing camera.yaml then gives
+    camera None; a present one is still validated.
     """
     root = Path(root)
     if not root.is_dir():
         raise MissingFileError(root, "sequence directory not found")
-    camera = read_camera_yaml(root / CAMERA_FILE)
+    camera = None if not require_camera and not (root / CAMERA_FILE).exists() else read_camera_yaml(root / CAMERA_FILE)
     frames = read_csv_columns(root / FRAMES_FILE, FRAMES_HEADER, text_columns=("image",))
     if len(frames["timestamp"]) == 0:
         raise EmptySequenceError(root / FRAMES_FILE, "no frames listed")

@@ -1,0 +1,170 @@
+"""Landmark recognition between two horizons (paper §3.1): nearest-neighbour matching with a ratio test, the
+recognition score (sum of inverse descriptor distances), and "NN with RANSAC" fitting the line
+x_test = b_s * x_stored + b_d, which also tells how the robot moved (b_d: a turn, b_s: moving closer or away).
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from loops.horizon.params import HorizonParams
+from loops.horizon.surf1d import SIGN_WEIGHT, HorizonFeatures
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """Outcome of matching a test horizon against a stored one.
+
+    score: NN recognition score, sum over ratio-test matches of 1 / descriptor distance.
+    score_ransac: the same sum over the RANSAC consensus set (0 when fewer than ransac_min_inliers agree).
+    b_s, b_d: the fitted x_test = b_s * x_stored + b_d (image pixels); NaN when RANSAC found no consensus.
+    matches: (M, 2) indices (test feature, stored feature) passing the ratio test.
+    distances: (M,) their descriptor distances.
+    inliers: (M,) bool, the consensus set.
+    """
+
+    score: float
+    score_ransac: float
+    b_s: float
+    b_d: float
+    matches: np.ndarray
+    distances: np.ndarray
+    inliers: np.ndarray
+
+    @property
+    def n_matches(self) -> int:
+        return int(self.matches.shape[0])
+
+    @property
+    def n_inliers(self) -> int:
+        return int(self.inliers.sum())
+
+
+def _no_match(matches: np.ndarray, dist: np.ndarray, score: float) -> MatchResult:
+    return MatchResult(score, 0.0, float("nan"), float("nan"), matches, dist, np.zeros(len(dist), bool))
+
+
+def nn_matches(test: HorizonFeatures, stored: HorizonFeatures, params: HorizonParams = HorizonParams()
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest stored neighbour of every test feature passing the ratio test: ((M, 2) index pairs, (M,) distances).
+
+    With params.match_sign, features only match features of the same blob sign (the nearest and second-nearest
+    are sought among those); with params.one_to_one, a stored feature keeps only its closest test feature.
+    """
+    n = len(test)
+    if n == 0 or len(stored) < 2:
+        return np.zeros((0, 2), np.intp), np.zeros(0)
+    ka, _ = test.keys
+    _, kbt = stored.keys
+    if params.match_sign:
+        sim = ka @ kbt                       # desc . desc + SIGN_WEIGHT^2 * sign * sign
+        base = 2.0 + 2.0 * SIGN_WEIGHT ** 2  # |a - b|^2 = base - 2 sim
+    else:
+        sim = ka[:, :-1] @ kbt[:-1]
+        base = 2.0
+    rows = np.arange(n)
+    j1 = sim.argmax(axis=1)
+    s1 = sim[rows, j1]
+    sim[rows, j1] = -np.inf
+    s2 = sim[rows, sim.argmax(axis=1)]
+    d1 = base - 2.0 * s1
+    ok = d1 < (params.ratio ** 2) * (base - 2.0 * s2)
+    if params.match_sign:
+        ok &= s1 > 0.0                       # the nearest has the same sign (else sim <= 1 - SIGN_WEIGHT^2 < 0)
+    ti = np.flatnonzero(ok)
+    si = j1[ti]
+    dist = np.sqrt(np.maximum(d1[ti], 0.0))
+    if params.one_to_one and ti.size > 1:
+        order = np.lexsort((dist, si))
+        first = np.ones(order.size, bool)
+        first[1:] = si[order][1:] != si[order][:-1]
+        keep = np.sort(order[first])
+        ti, si, dist = ti[keep], si[keep], dist[keep]
+    return np.stack([ti, si], axis=1), dist.astype(np.float64)
+
+
+@functools.lru_cache(maxsize=512)
+def _hypotheses(m: int, iterations: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs (i, j), i != j, for RANSAC on m matches: all pairs when few, else `iterations` random ones.
+
+    Cached per (m, iterations, seed), so RANSAC is deterministic and needs no random generator per call.
+    """
+    if m * (m - 1) // 2 <= iterations:
+        i, j = np.triu_indices(m, 1)
+    else:
+        rng = np.random.default_rng([seed, m])
+        i = rng.integers(0, m, iterations)
+        j = (i + 1 + rng.integers(0, m - 1, iterations)) % m
+    i.setflags(write=False)
+    j.setflags(write=False)
+    return i, j
+
+
+def fit_line_ransac(x_test: np.ndarray, x_stored: np.ndarray, params: HorizonParams = HorizonParams(),
+                    log_scale_ratio: np.ndarray | None = None) -> tuple[float, float, np.ndarray]:
+    """RANSAC fit of x_test = b_s * x_stored + b_d: (b_s, b_d, inlier mask), or (nan, nan, all False) when no line
+    gathers params.ransac_min_inliers. Lines with b_s outside [1/max_scale_change, max_scale_change] are not
+    considered (b_s <= 0 would reverse the horizon's order).
+
+    With params.scale_tolerance > 0 and log_scale_ratio = log2(test scale / stored scale) per match, an inlier's
+    scale ratio must also agree with b_s within that many octaves. The largest consensus set wins (the first
+    hypothesis on ties); the line is then refitted to it by least squares.
+    """
+    m = x_test.shape[0]
+    none = (float("nan"), float("nan"), np.zeros(m, bool))
+    if m < max(2, params.ransac_min_inliers):
+        return none
+    i, j = _hypotheses(m, params.ransac_iterations, params.seed)
+    xs_i = x_stored[i]
+    xt_i = x_test[i]
+    dxs = xs_i - x_stored[j]
+    dxs[dxs == 0] = np.nan                   # two matches on one stored column define no line
+    bs = (xt_i - x_test[j]) / dxs
+    lo, hi = 1.0 / params.max_scale_change, params.max_scale_change
+    bs[~((bs >= lo) & (bs <= hi))] = np.nan  # NaN fails every inlier test below
+    bd = xt_i - bs * xs_i
+    # Residuals of every match under every hypothesis, in place in float32 (pixels: ample precision), then the
+    # inlier indicator as 0/1 so that counting is a matrix-vector product.
+    res = np.multiply.outer(bs.astype(np.float32), x_stored.astype(np.float32))
+    res += bd.astype(np.float32)[:, None]
+    res -= x_test.astype(np.float32)
+    np.abs(res, out=res)
+    inl = np.less_equal(res, np.float32(params.ransac_tolerance), out=res)
+    use_scale = params.scale_tolerance > 0 and log_scale_ratio is not None
+    if use_scale:
+        inl *= np.abs(log_scale_ratio - np.log2(bs)[:, None]) <= params.scale_tolerance
+    count = inl @ np.ones(m, np.float32)
+    best = int(count.argmax())
+    if count[best] < params.ransac_min_inliers:
+        return none
+    b_s, b_d, mask = float(bs[best]), float(bd[best]), inl[best] > 0
+    # Least-squares refit on the consensus set; kept only if it does not lose inliers.
+    xs, xt = x_stored[mask], x_test[mask]
+    xm, tm = xs.mean(), xt.mean()
+    dx = xs - xm
+    var = float(dx @ dx)
+    if var > 0:
+        rs = float(dx @ (xt - tm)) / var
+        if lo <= rs <= hi:
+            rd = tm - rs * xm
+            mask2 = np.abs(x_test - (rs * x_stored + rd)) <= params.ransac_tolerance
+            if use_scale:
+                mask2 &= np.abs(log_scale_ratio - np.log2(rs)) <= params.scale_tolerance
+            if np.count_nonzero(mask2) >= count[best]:
+                b_s, b_d, mask = rs, rd, mask2
+    return b_s, b_d, mask
+
+
+def match(test: HorizonFeatures, stored: HorizonFeatures, params: HorizonParams = HorizonParams()) -> MatchResult:
+    """Match a test horizon against a stored one: NN score, NN+RANSAC score and the fitted (b_s, b_d)."""
+    pairs, dist = nn_matches(test, stored, params)
+    w = 1.0 / np.maximum(dist, params.min_distance)
+    score = float(w.sum())
+    if pairs.shape[0] < params.ransac_min_inliers:
+        return _no_match(pairs, dist, score)
+    ti, si = pairs[:, 0], pairs[:, 1]
+    lsr = np.log2(test.scale[ti] / stored.scale[si]) if params.scale_tolerance > 0 else None
+    b_s, b_d, inl = fit_line_ransac(test.x[ti], stored.x[si], params, lsr)
+    return MatchResult(score, float(w[inl].sum()), b_s, b_d, pairs, dist, inl)

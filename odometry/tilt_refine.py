@@ -1,0 +1,125 @@
+"""Planar motion refined together with the momentary camera tilt and height of both frames.
+
+A robot pitches, rolls and bounces a little as it drives (suspension, floor unevenness, accelerations). A tilt
+of tau shifts the whole floor footprint by about camera_height * tau: 0.004 rad at 0.5 m is 2 mm, the same
+as a translation, so a purely planar fit turns every wobble into odometry error. The tilt also changes the
+perspective of the view (points far from the image centre move more), and that part is visible: the motion
+between two views of the floor plane is a plane-induced homography with 8 degrees of freedom, which here are
+the planar motion (3), the tilt of each frame (2 + 2) and the height ratio (1).
+
+`refine_planar_tilt` starts from the rigid (Kabsch) solution on the RANSAC inliers and runs Gauss-Newton on
+
+    r_i = R(dtheta) P_cur(x_cur_i; tilt_cur, h (1 + s)) + t - P_ref(x_ref_i; tilt_ref, h)
+
+with zero-mean Gaussian priors on the tilts (tilt_sigma) and on s (height_sigma / h), so the estimate stays
+well-posed when the motion is too small to see perspective. The covariance of (dx, dy, dtheta) is the
+(dx, dy, dtheta) block of the inverse of the whitened normal matrix: it includes what the tilts leave unknown.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from odometry.camera import CameraModel
+
+_EPS = 1e-6  # finite-difference step for the tilt and height derivatives (rad, relative)
+
+
+@dataclass
+class TiltFit:
+    """Refined motion; `params` = dx, dy, dtheta, roll_ref, pitch_ref, roll_cur, pitch_cur, s (height ratio - 1)."""
+
+    delta: np.ndarray
+    covariance: np.ndarray
+    params: np.ndarray
+    sigma: float
+    rms: float
+    iterations: int
+
+
+def _floor(camera: CameraModel, xn: np.ndarray, heights: np.ndarray, tilts: np.ndarray) -> np.ndarray:
+    base = np.asarray(camera.tilt)
+    return camera.rays_to_floor_batch(xn, heights, np.asarray(tilts) + base)
+
+
+def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarray, delta0: np.ndarray,
+                       tilt_sigma: float, height_sigma: float, sigma_floor: float, iterations: int = 2
+                       ) -> TiltFit | None:
+    """Gauss-Newton refinement of the planar motion ref -> cur with both frames' tilt and the height ratio.
+
+    Args:
+        camera: the downward camera (nominal height and any calibrated tilt; estimated tilts add to it).
+        xn_ref, xn_cur: undistorted normalised coordinates (N, 2) of matched inlier points.
+        delta0: (3,) starting motion (the rigid fit): P_ref ≈ R P_cur + t.
+        tilt_sigma: prior standard deviation of each frame's roll and pitch (rad); 0 fixes them at 0.
+        height_sigma: prior standard deviation of the height difference (m); 0 fixes it.
+        sigma_floor: lower bound of the per-axis residual standard deviation (m) used for the covariance.
+        iterations: Gauss-Newton steps (the problem is nearly linear: 2-3 suffice).
+
+    Returns None with fewer than 8 points.
+    """
+    xn_ref = np.asarray(xn_ref, dtype=np.float64).reshape(-1, 2)
+    xn_cur = np.asarray(xn_cur, dtype=np.float64).reshape(-1, 2)
+    n = len(xn_ref)
+    if n < 8 or len(xn_cur) != n:
+        return None
+    h = float(camera.camera_height)
+    q = np.zeros(8)
+    q[:3] = delta0
+    # prior precisions (a zero sigma pins the parameter with a very stiff prior)
+    prec = np.zeros(8)
+    prec[3:7] = 1.0 / max(tilt_sigma, 1e-9) ** 2
+    prec[7] = 1.0 / max(height_sigma / h, 1e-9) ** 2
+    e = _EPS
+    sigma2 = max(sigma_floor, 1e-12) ** 2
+    it = 0
+    for it in range(1, iterations + 1):
+        rk, pk, rc, pc, s = q[3:]
+        pr = _floor(camera, xn_ref, [h, h, h], [(rk, pk), (rk + e, pk), (rk, pk + e)])
+        pcur = _floor(camera, xn_cur, [h * (1 + s)] * 3 + [h * (1 + s + e)],
+                      [(rc, pc), (rc + e, pc), (rc, pc + e), (rc, pc)])
+        c, sn = math.cos(q[2]), math.sin(q[2])
+        rot = np.array([[c, -sn], [sn, c]])
+        rp = pcur[0] @ rot.T
+        res = rp + q[:2] - pr[0]                                   # (N, 2)
+        jac = np.empty((n, 2, 8))
+        jac[:, :, 0] = [1.0, 0.0]
+        jac[:, :, 1] = [0.0, 1.0]
+        jac[:, 0, 2], jac[:, 1, 2] = -rp[:, 1], rp[:, 0]
+        jac[:, :, 3] = -(pr[1] - pr[0]) / e
+        jac[:, :, 4] = -(pr[2] - pr[0]) / e
+        jac[:, :, 5] = ((pcur[1] - pcur[0]) / e) @ rot.T
+        jac[:, :, 6] = ((pcur[2] - pcur[0]) / e) @ rot.T
+        jac[:, :, 7] = ((pcur[3] - pcur[0]) / e) @ rot.T
+        jf = jac.reshape(-1, 8)
+        rf = res.reshape(-1)
+        if it == 1:
+            # measurement noise from the rigid start: tilt effects only lower it, so this is conservative
+            sigma2 = max(float(rf @ rf) / max(2 * n - 3, 1), sigma2)
+        a = jf.T @ jf / sigma2 + np.diag(prec)
+        g = jf.T @ rf / sigma2 + prec * q
+        try:
+            step = np.linalg.solve(a, -g)
+        except np.linalg.LinAlgError:
+            return None
+        q = q + step
+        if np.max(np.abs(step[:3])) < 1e-10:
+            break
+    # final residuals and covariance at the solution
+    rk, pk, rc, pc, s = q[3:]
+    pr = _floor(camera, xn_ref, [h], [(rk, pk)])[0]
+    pcur = _floor(camera, xn_cur, [h * (1 + s)], [(rc, pc)])[0]
+    c, sn = math.cos(q[2]), math.sin(q[2])
+    res = pcur @ np.array([[c, -sn], [sn, c]]).T + q[:2] - pr
+    rss = float((res * res).sum())
+    sigma = max(math.sqrt(rss / max(2 * n - 8, 1)), sigma_floor)
+    a = jf.T @ jf / sigma ** 2 + np.diag(prec)
+    try:
+        cov_full = np.linalg.inv(a)
+    except np.linalg.LinAlgError:
+        return None
+    cov = 0.5 * (cov_full[:3, :3] + cov_full[:3, :3].T)
+    return TiltFit(delta=q[:3].copy(), covariance=cov, params=q, sigma=sigma, rms=math.sqrt(rss / n),
+                   iterations=it)

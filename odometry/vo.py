@@ -1,0 +1,654 @@
+"""Downward-camera visual odometry: keyframe LK tracking -> floor points -> Kabsch inside RANSAC (seed 001 §IV-D).
+
+Per frame:
+
+1. predict the motion since the previous frame (the fused wheel/gyro motion when given, else constant velocity);
+2. predict where the keyframe's corners are now (through the floor plane) and refine them with pyramidal LK
+   started there (sub-pixel; the template is always the keyframe, so there is no drift between keyframes);
+3. back-project the tracked pixels onto the floor with `CameraModel.pixel_to_floor` (distortion, height, tilt,
+   mount) and fit the planar rigid motion keyframe -> current frame by 2-point RANSAC + centroid-removed SVD
+   refined on all inliers; its covariance comes from the inlier residuals and the point spread (J^T J);
+4. if that fails, match the previous frame instead; if that fails too, the frame is a failure: the motion is the
+   fallback (fused wheel/gyro) with an inflated covariance (status FALLBACK) or, without one, a constant-velocity
+   guess with a large covariance (status LOST). Never a silent zero motion;
+5. start a new keyframe when too few keyframe corners remain trackable, the rotation is large, or tracking failed
+   on a usable frame.
+
+Direction convention: floor points of the current frame (its base frame) are mapped onto the keyframe's floor
+points; that rigid transform is the pose of the current frame in the keyframe's frame (`odometry.poses.compose`).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, fields, replace
+from enum import Enum
+from typing import Callable
+
+import numpy as np
+
+from odometry.camera import CameraModel
+from odometry.pose_cov import between_with_covariance, compose_with_covariance
+from odometry.poses import compose
+from odometry.rigid import RigidFit, ransac_rigid_2d
+from odometry.tilt_refine import refine_planar_tilt
+from odometry.tracking import (BadImage, coarse_shift, contrast, detect_corners, highpass, normalize, normalize_local,
+                               to_gray, track_lk)
+
+__all__ = ["Photometric", "Reference", "VOConfig", "VOEstimate", "VOStatus", "VOTrajectory", "VisualOdometry",
+           "run_visual_odometry"]
+
+
+class VOStatus(str, Enum):
+    """Where a frame's motion comes from."""
+
+    INIT = "init"          # the first frame: the origin
+    OK = "ok"              # measured by vision
+    FALLBACK = "fallback"  # vision failed: the given fallback motion (fused wheel/gyro), covariance inflated
+    LOST = "lost"          # vision failed and no fallback: constant-velocity guess with a large covariance
+
+
+class Photometric(str, Enum):
+    """How frames are normalised before LK (brightness constancy against lighting changes and vignetting)."""
+
+    NONE = "none"
+    GLOBAL = "global"       # gain and offset of the whole frame
+    HIGHPASS = "highpass"   # minus the local box mean: removes smooth light fields (default; 0.3 ms)
+    LOCAL = "local"         # local mean and contrast: the most invariant, ~10x the cost of HIGHPASS
+
+
+class Reference(str, Enum):
+    """What the current frame was matched against."""
+
+    NONE = "none"
+    KEYFRAME = "keyframe"
+    PREVIOUS = "previous"
+
+
+@dataclass(frozen=True)
+class VOConfig:
+    """Every tunable of the visual odometry (presets: `default`, `fast`).
+
+    Front end: corners (Shi-Tomasi) are detected at keyframes only, spread over `grid`; LK tracks them in every
+    frame from the motion prediction. Robust fit: thresholds are in pixels and converted to metres with the
+    camera's ground resolution. Keyframes: a new one starts when fewer than `keyframe_min_inliers` or
+    `keyframe_min_fraction` of its corners remain inliers, or the rotation since it exceeds
+    `keyframe_max_rotation` (LK windows do not rotate).
+
+    Covariance: sigma^2 (J^T J)^-1 of the fit (residual-based, sigma never below `pixel_sigma`, times
+    `covariance_scale`). With `refine_tilt` the robot's pitch, roll (prior `tilt_sigma`, rad) and bounce (prior
+    `height_sigma`, m) are estimated with the motion and marginalised into it. Without it, their effect is added
+    as a model term: a tilt shifts the whole view like a translation of camera_height * tilt, slowly
+    (correlation time `wobble_time`, s), so between frames dt apart a fraction 2 (1 - exp(-dt / wobble_time)) of
+    that variance appears; `tilt_rotation_coupling` is the heading error per radian of tilt. Fallback
+    covariances are multiplied by `fallback_inflation`.
+    """
+
+    max_features: int = 200
+    grid: tuple[int, int] = (8, 6)
+    quality: float = 0.01
+    min_distance: float = 14.0
+    half_resolution_detection: bool = True
+    border: int = 16
+    lk_window: int = 15
+    lk_levels: int = 0
+    lk_iterations: int = 20
+    lk_epsilon: float = 0.02
+    lk_min_eig: float = 1e-3
+    photometric: Photometric = Photometric.HIGHPASS
+    photometric_radius: int = 8
+    min_contrast: float = 2.0
+    min_features: int = 25
+    ransac_threshold_px: float = 1.5
+    ransac_iterations: int = 200
+    ransac_confidence: float = 0.999
+    min_inliers: int = 20
+    min_inlier_ratio: float = 0.35
+    keyframe_min_inliers: int = 60
+    keyframe_min_fraction: float = 0.4
+    keyframe_max_rotation: float = math.radians(12.0)
+    pixel_sigma: float = 0.05
+    covariance_scale: float = 1.0
+    refine_tilt: bool = True
+    tilt_sigma: float = 0.003
+    height_sigma: float = 0.002
+    wobble_time: float = 2.0
+    tilt_rotation_coupling: float = 0.15
+    fallback_inflation: float = 4.0
+    lost_sigma_xy: float = 0.05
+    lost_sigma_theta: float = 0.1
+    max_failures_before_reset: int = 2
+    coarse_retry: bool = True
+    retry_levels: int = 3
+    coarse_min_response: float = 0.05
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "photometric", Photometric(self.photometric))
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, (bool, Enum)) or f.name == "grid":
+                continue
+            if not math.isfinite(v) or v < 0:
+                raise ValueError(f"VOConfig.{f.name} must be a finite number >= 0, got {v!r}")
+        if len(self.grid) != 2 or min(self.grid) < 1:
+            raise ValueError(f"VOConfig.grid must be two positive integers, got {self.grid!r}")
+        if self.lk_window < 5 or self.lk_window % 2 == 0:
+            raise ValueError(f"VOConfig.lk_window must be an odd number >= 5, got {self.lk_window}")
+        if self.min_inliers < 3:
+            raise ValueError(f"VOConfig.min_inliers must be >= 3, got {self.min_inliers}")
+
+    @classmethod
+    def default(cls) -> "VOConfig":
+        return cls()
+
+    @classmethod
+    def fast(cls) -> "VOConfig":
+        """Fewer corners and a plain rigid fit (no tilt refinement). Measured on the natural floors: about 1.8x
+        the frame rate of `default`, drift 0.16 % instead of 0.11 %."""
+        return cls(max_features=120, refine_tilt=False, keyframe_min_inliers=40, ransac_iterations=100)
+
+    @classmethod
+    def preset(cls, name: str) -> "VOConfig":
+        presets = {"default": cls.default, "fast": cls.fast}
+        if name not in presets:
+            raise ValueError(f"unknown VO preset {name!r}; choose one of {', '.join(presets)}")
+        return presets[name]()
+
+    @classmethod
+    def from_dict(cls, d: dict, base: "VOConfig | None" = None) -> "VOConfig":
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise ValueError(f"unknown VOConfig field(s): {', '.join(unknown)}")
+        d = {k: tuple(v) if k == "grid" else v for k, v in d.items()}
+        return replace(base or cls.default(), **d)
+
+
+@dataclass
+class VOEstimate:
+    """The result for one frame.
+
+    Attributes:
+        index, timestamp: the frame.
+        delta: (3,) motion from the previous frame (dx, dy, dtheta): pose = compose(previous pose, delta).
+        covariance: (3, 3) covariance of delta (x, y, theta order; usable as a GTSAM Pose2 noise model).
+        status: INIT / OK / FALLBACK / LOST.
+        reference: what vision matched against (keyframe, previous frame or none).
+        n_matches, n_inliers, inlier_ratio: tracked correspondences and the RANSAC inliers among them.
+        rms_px: RMS inlier residual in pixels (NaN without a fit).
+        is_keyframe: this frame starts a new keyframe.
+        keyframe_index: index of the keyframe that `keyframe_delta` is relative to (None if there is none).
+        keyframe_delta, keyframe_covariance: pose of this frame in that keyframe's frame and its covariance
+            (for keyframe-to-keyframe odometry factors).
+        pose: (3,) composed pose of this frame (first frame at the origin).
+        keypoints: (K, 2) pixel positions of the tracked corners in this frame.
+        matches: (M, 4) ref_u, ref_v, cur_u, cur_v of all tracked correspondences.
+        inliers: (M,) bool RANSAC inlier mask over `matches`.
+        reason: why vision failed ("" when it did not).
+        fit_seconds: time spent in the robust fit (RANSAC + Kabsch), part of the step's time.
+    """
+
+    index: int
+    timestamp: float
+    delta: np.ndarray
+    covariance: np.ndarray
+    status: VOStatus
+    reference: Reference = Reference.NONE
+    n_matches: int = 0
+    n_inliers: int = 0
+    inlier_ratio: float = 0.0
+    rms_px: float = float("nan")
+    is_keyframe: bool = False
+    keyframe_index: int | None = None
+    keyframe_delta: np.ndarray | None = None
+    keyframe_covariance: np.ndarray | None = None
+    pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    keypoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    matches: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    reason: str = ""
+    fit_seconds: float = 0.0
+
+    @property
+    def inlier_matches(self) -> np.ndarray:
+        """(I, 4) the inlier correspondences, for visualisation."""
+        return self.matches[self.inliers]
+
+
+@dataclass(frozen=True)
+class _Images:
+    """A frame prepared for LK: `fine` is photometrically normalised for precise single-level tracking; `coarse`
+    keeps the low frequencies (gain/offset normalised only) that the coarse levels of a deep pyramid need."""
+
+    fine: np.ndarray
+    coarse: np.ndarray
+
+
+@dataclass
+class _Keyframe:
+    index: int
+    timestamp: float
+    gray: _Images        # LK templates
+    pts: np.ndarray      # (N, 2) float32 corner pixels
+    xn: np.ndarray       # (N, 2) their undistorted normalised coordinates
+    floor: np.ndarray    # (N, 2) their floor points in the keyframe's base frame
+
+
+class VisualOdometry:
+    """Frame-by-frame downward VO.
+
+    >>> vo = VisualOdometry(camera, VOConfig.default())
+    >>> est = vo.process(image, timestamp, fallback=(delta, cov))   # fallback optional
+    >>> est.delta, est.covariance, est.status, vo.poses
+
+    `fallback` is the motion since the previous processed frame from another source (e.g. the fused wheel/gyro
+    `FusedTrajectory.relative(k-1, k)`); it seeds the LK prediction and replaces vision when vision fails.
+    """
+
+    def __init__(self, camera: CameraModel, config: VOConfig | None = None) -> None:
+        if not camera.is_downward:
+            raise ValueError("VisualOdometry needs a downward camera (camera_height in camera.yaml)")
+        self.camera = camera
+        self.config = config or VOConfig.default()
+        self._rng = np.random.default_rng(self.config.seed)
+        self._m_per_px = camera.ground_resolution()
+        self._poses: list[np.ndarray] = []
+        self._last_t: float | None = None
+        self._velocity: np.ndarray | None = None  # last measured motion per second
+        self._kf: _Keyframe | None = None
+        self._t_kp = np.zeros(3)                  # pose of the previous frame in the keyframe frame
+        self._c_kp = np.zeros((3, 3))             # its full covariance
+        self._c_kp_fit: np.ndarray | None = None  # its fit-only covariance when vision measured it from this keyframe
+        self._prev_gray: _Images | None = None
+        self._prev_px: np.ndarray | None = None   # tracked keyframe corners in the previous frame (inliers)
+        self._failures = 0                        # consecutive frames vision could not measure
+        self._fit_seconds = 0.0
+        self._predicted = False
+
+    # ------------------------------------------------------------------ public state
+    @property
+    def poses(self) -> np.ndarray:
+        """(N, 3) composed poses of the frames processed so far; the first at the origin."""
+        return np.array(self._poses).reshape(-1, 3)
+
+    def __len__(self) -> int:
+        return len(self._poses)
+
+    # ------------------------------------------------------------------ the step
+    def process(self, image: np.ndarray | None, timestamp: float,
+                fallback: tuple[np.ndarray, np.ndarray] | None = None) -> VOEstimate:
+        """Estimate the motion since the previous frame. `image` may be None or invalid (a failed frame).
+
+        Raises ValueError for a timestamp that does not increase (a data error, not a vision failure).
+        """
+        timestamp = float(timestamp)
+        index = len(self._poses)
+        self._fit_seconds = 0.0
+        if self._last_t is not None and not timestamp > self._last_t:
+            raise ValueError(f"frame {index}: timestamp {timestamp!r} does not increase (previous {self._last_t!r})")
+        dt = None if self._last_t is None else timestamp - self._last_t
+        if fallback is not None:
+            fb_delta = np.asarray(fallback[0], dtype=float).reshape(3)
+            fb_cov = np.asarray(fallback[1], dtype=float).reshape(3, 3)
+            if not (np.all(np.isfinite(fb_delta)) and np.all(np.isfinite(fb_cov))):
+                fallback = None
+            else:
+                fallback = (fb_delta, fb_cov)
+        try:
+            gray = to_gray(image, self.camera.size)
+            if contrast(gray) < self.config.min_contrast:
+                raise BadImage("blank frame (no contrast)")
+            reason = ""
+        except BadImage as exc:
+            gray, reason = None, str(exc)
+        if gray is not None:
+            gray = self._prepare(gray)
+
+        if index == 0:
+            est = VOEstimate(index=0, timestamp=timestamp, delta=np.zeros(3), covariance=np.zeros((3, 3)),
+                             status=VOStatus.INIT, reason=reason)
+            if gray is not None:
+                est.is_keyframe = self._start_keyframe(gray, 0, timestamp, reason_out=est)
+                est.keyframe_index = 0 if est.is_keyframe else None
+            self._finish(est, gray, timestamp, dt)
+            return est
+
+        pred, pred_cov = self._prediction(dt, fallback)
+        self._predicted = fallback is not None or self._velocity is not None
+        est = None
+        if gray is not None and self._kf is not None:
+            est = self._match_keyframe(gray, index, timestamp, dt, pred)
+            if est is None and self._prev_px is not None and self._prev_gray is not None \
+                    and self._kf.index != index - 1:
+                est = self._match_previous(gray, index, timestamp, dt, pred)
+            if est is None:
+                reason = "too few inliers"
+        elif gray is not None:
+            reason = "no keyframe to match (tracking was lost)"
+        if est is None:
+            est = self._failure(index, timestamp, reason, fallback, pred, pred_cov, gray)
+        self._finish(est, gray, timestamp, dt)
+        return est
+
+    # ------------------------------------------------------------------ pieces
+    def _prepare(self, gray: np.ndarray) -> _Images:
+        mode, radius = self.config.photometric, self.config.photometric_radius
+        coarse = normalize(gray)
+        if mode == Photometric.LOCAL:
+            return _Images(normalize_local(gray, radius), coarse)
+        if mode == Photometric.HIGHPASS:
+            return _Images(highpass(gray, radius), coarse)
+        return _Images(coarse if mode == Photometric.GLOBAL else gray, coarse)
+
+    def _prediction(self, dt: float, fallback) -> tuple[np.ndarray, np.ndarray]:
+        c = self.config
+        if fallback is not None:
+            return fallback
+        # without any motion source the guess is "no motion", flagged by self._predicted = False
+        pred = self._velocity * dt if self._velocity is not None else np.zeros(3)
+        return pred, np.diag([c.lost_sigma_xy ** 2, c.lost_sigma_xy ** 2, c.lost_sigma_theta ** 2])
+
+    def _start_keyframe(self, gray: _Images, index: int, timestamp: float,
+                        reason_out: VOEstimate | None = None) -> bool:
+        c = self.config
+        pts = detect_corners(gray.fine, c.max_features, c.grid, c.quality, c.min_distance, c.border,
+                             c.half_resolution_detection)
+        if len(pts) < c.min_features:
+            if reason_out is not None and not reason_out.reason:
+                reason_out.reason = f"too few corners for a keyframe ({len(pts)} < {c.min_features})"
+            return False
+        xn = self.camera.normalize(pts)
+        self._kf = _Keyframe(index=index, timestamp=timestamp, gray=gray, pts=pts, xn=xn,
+                             floor=self.camera.rays_to_floor(xn))
+        self._t_kp = np.zeros(3)
+        self._c_kp = np.zeros((3, 3))
+        self._c_kp_fit = np.zeros((3, 3))
+        self._prev_px = pts
+        return True
+
+    def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray,
+             ref_floor: np.ndarray) -> RigidFit | None:
+        """RANSAC + Kabsch on floor points (cur -> ref), then the tilt-aware refinement on the inliers."""
+        c = self.config
+        t0 = time.perf_counter()
+        fit = ransac_rigid_2d(cur_floor, ref_floor, c.ransac_threshold_px * self._m_per_px, rng=self._rng,
+                              max_iterations=c.ransac_iterations, confidence=c.ransac_confidence,
+                              sigma_floor=c.pixel_sigma * self._m_per_px)
+        if fit is not None and fit.n_inliers >= c.min_inliers and fit.inlier_ratio >= c.min_inlier_ratio \
+                and c.refine_tilt:
+            tf = refine_planar_tilt(self.camera, ref_xn[fit.inliers], cur_xn[fit.inliers], fit.delta,
+                                    c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px)
+            if tf is not None:
+                fit.delta, fit.covariance, fit.rms, fit.sigma = tf.delta, tf.covariance, tf.rms, tf.sigma
+        self._fit_seconds += time.perf_counter() - t0
+        if fit is None or fit.n_inliers < c.min_inliers or fit.inlier_ratio < c.min_inlier_ratio:
+            return None
+        fit.covariance = fit.covariance * c.covariance_scale
+        return fit
+
+    def _track(self, ref_gray: _Images, ref_px: np.ndarray, ref_xn: np.ndarray, ref_floor: np.ndarray,
+               gray: _Images, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None
+               ) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
+        """LK from a reference frame, started at the positions predicted by the motion t_ref_cur (or by a global
+        image `shift` when given); then the robust fit."""
+        c = self.config
+        if shift is None:
+            guess_floor = (ref_floor - t_ref_cur[:2]) @ _rot(t_ref_cur[2])  # reference floor points, current frame
+            guess = self.camera.floor_to_pixel(guess_floor)
+        else:
+            guess = ref_px + shift
+        w, h = self.camera.size
+        m = 2 * c.border
+        visible = (guess[:, 0] > -m) & (guess[:, 0] < w + m) & (guess[:, 1] > -m) & (guess[:, 1] < h + m)
+        ref_px, ref_xn, ref_floor, guess = ref_px[visible], ref_xn[visible], ref_floor[visible], guess[visible]
+        if levels is not None and levels > c.lk_levels:
+            # a wide capture range first, on images that keep their low frequencies, then the precise pass
+            coarse_px, coarse_ok = track_lk(ref_gray.coarse, gray.coarse, ref_px, guess, c.lk_window, levels,
+                                            c.lk_iterations, c.lk_epsilon, c.lk_min_eig)
+            guess = np.where(coarse_ok[:, None], coarse_px, guess)
+        cur_px, ok = track_lk(ref_gray.fine, gray.fine, ref_px, guess, c.lk_window, c.lk_levels, c.lk_iterations,
+                              c.lk_epsilon, c.lk_min_eig)
+        ref_px, ref_xn, ref_floor, cur_px = ref_px[ok], ref_xn[ok], ref_floor[ok], cur_px[ok]
+        if len(cur_px) < c.min_inliers:
+            return None, ref_px, cur_px, np.zeros(len(cur_px), bool)
+        cur_xn = self.camera.normalize(cur_px)
+        fit = self._fit(cur_xn, ref_xn, self.camera.rays_to_floor(cur_xn), ref_floor)
+        return fit, ref_px, cur_px, (fit.inliers if fit is not None else np.zeros(len(cur_px), bool))
+
+    def _track_with_retry(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur):
+        """Track from the motion prediction; if that fails (or there is none), retry from a phase-correlation shift
+        with a deeper LK pyramid: the prediction may be missing or wrong (first frames, wheel slip, a dropped
+        frame) and the shift ignores rotation."""
+        c = self.config
+        deep = max(c.lk_levels, c.retry_levels)
+        out = (None,) if t_ref_cur is None else self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur)
+        if out[0] is None and t_ref_cur is not None and deep > c.lk_levels:
+            # a poor prediction (slip, failed frames in between): the same start with a wider capture range
+            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep)
+        if out[0] is None and c.coarse_retry:
+            shift, response = coarse_shift(ref_gray.coarse, gray.coarse)
+            if response > c.coarse_min_response:
+                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), shift=shift, levels=deep)
+        if out[0] is None and t_ref_cur is None:
+            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3),
+                              levels=max(c.lk_levels, c.retry_levels))
+        return out
+
+    def _model_covariance(self, dt: float, motion: np.ndarray) -> np.ndarray:
+        """What the planar model misses between two frames dt apart: tilt/height wobble (see VOConfig)."""
+        c = self.config
+        frac = 2.0 * (1.0 - math.exp(-dt / c.wobble_time)) if c.wobble_time > 0 else 2.0
+        h = self.camera.camera_height
+        shift2 = (h * c.tilt_sigma) ** 2 + (c.height_sigma / h) ** 2 * float(motion[0] ** 2 + motion[1] ** 2)
+        return frac * np.diag([shift2, shift2, (c.tilt_rotation_coupling * c.tilt_sigma) ** 2])
+
+    def _match_keyframe(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
+        kf = self._kf
+        t_kc_pred = compose(self._t_kp, pred) if self._predicted else None
+        fit, ref_px, cur_px, inl = self._track_with_retry(kf.gray, kf.pts, kf.xn, kf.floor, gray, t_kc_pred)
+        if fit is None:
+            return None
+        tilt = self.config.refine_tilt  # the fit's covariance already covers the wobble
+        c_kc = fit.covariance if tilt else fit.covariance + self._model_covariance(timestamp - kf.timestamp,
+                                                                                    fit.delta)
+        if self._c_kp_fit is not None and not tilt:
+            # previous frame measured from the same keyframe: their wobble errors are mostly shared and cancel
+            delta, cov = between_with_covariance(self._t_kp, self._c_kp_fit, fit.delta, fit.covariance)
+            cov = cov + self._model_covariance(dt, delta)
+        else:
+            delta, cov = between_with_covariance(self._t_kp, self._c_kp, fit.delta, c_kc)
+        est = self._estimate(index, timestamp, delta, cov, Reference.KEYFRAME, fit, ref_px, cur_px)
+        est.keyframe_index, est.keyframe_delta, est.keyframe_covariance = kf.index, fit.delta, c_kc
+        self._t_kp, self._c_kp, self._c_kp_fit = fit.delta, c_kc, fit.covariance
+        self._prev_px = cur_px[inl]
+        # keep or renew the keyframe
+        c = self.config
+        n_in = fit.n_inliers
+        renew = (n_in < c.keyframe_min_inliers or n_in < c.keyframe_min_fraction * len(kf.pts)
+                 or abs(fit.delta[2]) > c.keyframe_max_rotation)
+        if renew and self._start_keyframe(gray, index, timestamp):
+            est.is_keyframe = True
+        return est
+
+    def _match_previous(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
+        prev_px = self._prev_px
+        prev_xn = self.camera.normalize(prev_px)
+        fit, ref_px, cur_px, _ = self._track_with_retry(self._prev_gray, prev_px, prev_xn,
+                                                        self.camera.rays_to_floor(prev_xn), gray,
+                                                        pred if self._predicted else None)
+        if fit is None:
+            return None
+        cov = fit.covariance if self.config.refine_tilt else fit.covariance + self._model_covariance(dt, fit.delta)
+        est = self._estimate(index, timestamp, fit.delta, cov, Reference.PREVIOUS, fit, ref_px, cur_px)
+        # the keyframe could not be tracked: this frame replaces it
+        if self._start_keyframe(gray, index, timestamp):
+            est.is_keyframe = True
+            est.keyframe_index = index
+            est.keyframe_delta, est.keyframe_covariance = np.zeros(3), np.zeros((3, 3))
+        else:
+            self._kf = None
+        return est
+
+    def _estimate(self, index, timestamp, delta, cov, ref, fit: RigidFit, ref_px, cur_px) -> VOEstimate:
+        return VOEstimate(index=index, timestamp=timestamp, delta=delta, covariance=cov, status=VOStatus.OK,
+                          reference=ref, n_matches=len(cur_px), n_inliers=fit.n_inliers,
+                          inlier_ratio=fit.inlier_ratio, rms_px=fit.rms / self._m_per_px,
+                          keypoints=np.asarray(cur_px, dtype=float),
+                          matches=np.column_stack([ref_px, cur_px]).astype(float), inliers=fit.inliers)
+
+    def _failure(self, index, timestamp, reason, fallback, pred, pred_cov, gray) -> VOEstimate:
+        c = self.config
+        if fallback is not None:
+            status = VOStatus.FALLBACK
+            cov = pred_cov * c.fallback_inflation
+        else:
+            status = VOStatus.LOST
+            cov = pred_cov
+        floor = (c.pixel_sigma * self._m_per_px) ** 2
+        cov = cov + np.diag([floor, floor, 1e-8])  # never a zero covariance, even for a zero motion
+        est = VOEstimate(index=index, timestamp=timestamp, delta=np.asarray(pred, float).copy(), covariance=cov,
+                         status=status, reason=reason)
+        self._failures += 1
+        if self._kf is not None:
+            # carry the keyframe through the failure: the next good frame may still see it (a blurred or corrupt
+            # frame should not end a good keyframe)
+            self._t_kp, self._c_kp = compose_with_covariance(self._t_kp, self._c_kp, est.delta, cov)
+            self._c_kp_fit = None
+            self._prev_px = None
+            if not self._keyframe_in_view(self._t_kp) or (gray is not None
+                                                         and self._failures > c.max_failures_before_reset):
+                self._kf = None
+        if gray is not None and self._kf is None:
+            # a usable frame and nothing to match it to: restart tracking from it
+            if self._start_keyframe(gray, index, timestamp, reason_out=est):
+                est.is_keyframe = True
+        if self._kf is not None:
+            est.keyframe_index = self._kf.index
+            est.keyframe_delta, est.keyframe_covariance = self._t_kp.copy(), self._c_kp.copy()
+        return est
+
+    def _keyframe_in_view(self, t_kc: np.ndarray) -> bool:
+        kf = self._kf
+        pts = (kf.floor - t_kc[:2]) @ _rot(t_kc[2])
+        px = self.camera.floor_to_pixel(pts)
+        w, h = self.camera.size
+        inside = (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
+        return inside.sum() >= self.config.min_inliers
+
+    def _finish(self, est: VOEstimate, gray, timestamp: float, dt: float | None) -> None:
+        est.fit_seconds = self._fit_seconds
+        prev = self._poses[-1] if self._poses else np.zeros(3)
+        est.pose = compose(prev, est.delta) if self._poses else np.zeros(3)
+        self._poses.append(est.pose)
+        if est.status == VOStatus.OK:
+            self._failures = 0
+            if dt:
+                self._velocity = est.delta / dt
+        self._last_t = timestamp
+        self._prev_gray = gray
+
+
+def _rot(theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+# ---------------------------------------------------------------------------------------------------- batch
+
+@dataclass
+class VOTrajectory:
+    """Batch result of `run_visual_odometry` (small per-frame arrays only: memory stays bounded).
+
+    poses (N, 3) start at the origin; deltas (N, 3) with deltas[0] = 0; covariances (N, 3, 3) of the deltas;
+    status (N,) VOStatus values; vo_seconds / image_seconds (N,) time of the VO step and of fetching the image.
+    """
+
+    timestamps: np.ndarray
+    poses: np.ndarray
+    deltas: np.ndarray
+    covariances: np.ndarray
+    status: list
+    n_matches: np.ndarray
+    n_inliers: np.ndarray
+    inlier_ratio: np.ndarray
+    rms_px: np.ndarray
+    is_keyframe: np.ndarray
+    reference: list
+    reason: list
+    vo_seconds: np.ndarray
+    image_seconds: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.timestamps)
+
+    def csv_rows(self) -> list[str]:
+        """`odometry.csv` lines: header then one row per frame."""
+        rows = ["index,timestamp,status,reference,dx,dy,dtheta,sigma_x,sigma_y,sigma_theta,n_matches,n_inliers,"
+                "inlier_ratio,rms_px,is_keyframe,vo_ms,reason"]
+        for i in range(len(self.timestamps)):
+            d, cv = self.deltas[i], self.covariances[i]
+            sig = np.sqrt(np.maximum(np.diag(cv), 0.0))
+            reason = self.reason[i].replace(",", ";").replace("\n", " ")
+            rows.append(f"{i},{self.timestamps[i]:.6f},{self.status[i].value},{self.reference[i].value},"
+                        f"{d[0]:.9f},{d[1]:.9f},{d[2]:.9f},{sig[0]:.3e},{sig[1]:.3e},{sig[2]:.3e},"
+                        f"{self.n_matches[i]},{self.n_inliers[i]},{self.inlier_ratio[i]:.4f},{self.rms_px[i]:.4f},"
+                        f"{int(self.is_keyframe[i])},{self.vo_seconds[i] * 1e3:.3f},{reason}")
+        return rows
+
+
+def run_visual_odometry(camera: CameraModel, timestamps: np.ndarray, get_image: Callable[[int], np.ndarray | None],
+                        config: VOConfig | None = None, fallback: Callable[[int], tuple] | None = None,
+                        on_frame: Callable[[VOEstimate], None] | None = None) -> VOTrajectory:
+    """Run the VO over a whole sequence.
+
+    Args:
+        camera: the downward camera.
+        timestamps: (N,) frame times.
+        get_image: index -> image (BGR or grey). Exceptions it raises for a single frame (OSError, ValueError)
+            make that frame a failed frame, like a corrupt image.
+        config: VO parameters.
+        fallback: optional index -> (delta, covariance) of the motion from frame index-1 to index, e.g.
+            `FusedTrajectory.relative(i - 1, i)` from `odometry.fusion.fuse_wheel_gyro`.
+        on_frame: optional callback receiving each VOEstimate (e.g. for visualisation).
+    """
+    ts = np.asarray(timestamps, dtype=float).reshape(-1)
+    vo = VisualOdometry(camera, config)
+    n = len(ts)
+    deltas = np.zeros((n, 3))
+    covs = np.zeros((n, 3, 3))
+    n_m = np.zeros(n, int)
+    n_i = np.zeros(n, int)
+    ratio = np.zeros(n)
+    rms = np.full(n, np.nan)
+    kf = np.zeros(n, bool)
+    t_vo = np.zeros(n)
+    t_img = np.zeros(n)
+    status, ref, reason = [], [], []
+    for i in range(n):
+        t0 = time.perf_counter()
+        try:
+            img = get_image(i)
+        except (OSError, ValueError) as exc:
+            img = None
+            err = f"image could not be read: {exc}"
+        else:
+            err = ""
+        t1 = time.perf_counter()
+        fb = fallback(i) if (fallback is not None and i > 0) else None
+        est = vo.process(img, ts[i], fallback=fb)
+        t2 = time.perf_counter()
+        if err and not est.reason.startswith("image could not"):
+            est.reason = err
+        deltas[i], covs[i] = est.delta, est.covariance
+        n_m[i], n_i[i], ratio[i], rms[i], kf[i] = est.n_matches, est.n_inliers, est.inlier_ratio, est.rms_px, \
+            est.is_keyframe
+        status.append(est.status)
+        ref.append(est.reference)
+        reason.append(est.reason)
+        t_img[i], t_vo[i] = t1 - t0, t2 - t1
+        if on_frame is not None:
+            on_frame(est)
+    return VOTrajectory(timestamps=ts, poses=vo.poses, deltas=deltas, covariances=covs, status=status,
+                        n_matches=n_m, n_inliers=n_i, inlier_ratio=ratio, rms_px=rms, is_keyframe=kf,
+                        reference=ref, reason=reason, vo_seconds=t_vo, image_seconds=t_img)

@@ -1,0 +1,216 @@
+"""Visual odometry on rendered floor views: accuracy, distortion, and the lost / fallback / recovery behaviour."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from odometry.poses import between, compose, integrate, wrap_angle
+from odometry.vo import Reference, VisualOdometry, VOConfig, VOStatus, run_visual_odometry
+from tests.odometry._floor import FloorRenderer, camera, synthetic_texture
+
+FPS = 20.0
+
+
+@pytest.fixture(scope="module")
+def tex():
+    return synthetic_texture(1400, seed=3)
+
+
+def _arc(n, step=(0.012, 0.0, 0.006)):
+    return integrate(np.tile(step, (n - 1, 1)))
+
+
+def _err(a, b):
+    e = np.asarray(a, float) - np.asarray(b, float)
+    e[..., 2] = wrap_angle(e[..., 2])
+    return e
+
+
+def test_two_frames_known_motion(tex):
+    cam = camera()
+    r = FloorRenderer(cam, tex, 0.001)
+    motion = np.array([0.021, -0.006, 0.03])
+    vo = VisualOdometry(cam)
+    first = vo.process(r.render([0.1, -0.1, 0.2]), 0.0)
+    assert first.status == VOStatus.INIT and first.is_keyframe and np.all(first.delta == 0)
+    est = vo.process(r.render(compose([0.1, -0.1, 0.2], motion)), 1 / FPS)
+    assert est.status == VOStatus.OK and est.reference == Reference.KEYFRAME
+    e = _err(est.delta, motion)
+    assert np.hypot(*e[:2]) < 2e-4 and abs(e[2]) < 3e-4
+    assert est.n_inliers >= 50 and est.inlier_ratio > 0.8
+    assert np.all(np.linalg.eigvalsh(est.covariance) > 0)
+    assert e @ np.linalg.solve(est.covariance, e) < 16.3
+    # what a visualiser needs
+    assert est.keypoints.shape[1] == 2 and est.inlier_matches.shape == (est.n_inliers, 4)
+    assert np.allclose(vo.poses[1], compose(vo.poses[0], est.delta))
+
+
+def test_back_projection_with_distortion(tex):
+    """A strongly distorted lens: the VO goes through CameraModel.pixel_to_floor and stays accurate; ignoring
+    the distortion (a wrong model) makes it clearly worse."""
+    dist = (-0.25, 0.08, 0.001, -0.001, 0.0)
+    cam = camera(distortion=dist)
+    r = FloorRenderer(cam, tex, 0.001)
+    poses = _arc(25)
+    imgs = [r.render(p) for p in poses]
+    # the geometry itself: pixel -> floor -> pixel is exact with distortion
+    uv = np.array([[5.0, 7.0], [320.0, 240.0], [630.0, 470.0]])
+    assert np.allclose(cam.floor_to_pixel(cam.pixel_to_floor(uv)), uv, atol=1e-6)
+    good = VisualOdometry(cam)
+    wrong = VisualOdometry(camera())  # same intrinsics, no distortion
+    for i, img in enumerate(imgs):
+        good.process(img, i / FPS)
+        wrong.process(img, i / FPS)
+    e_good = np.abs(_err(good.poses, poses)).max(0)
+    e_wrong = np.abs(_err(wrong.poses, poses)).max(0)
+    assert e_good[:2].max() < 1e-3 and e_good[2] < 1e-3
+    assert e_wrong[:2].max() > 5 * e_good[:2].max()
+
+
+def test_short_sequence_has_low_drift_and_deterministic_output(tex):
+    cam = camera()
+    r = FloorRenderer(cam, tex, 0.001)
+    poses = _arc(60)
+    imgs = [r.render(p) for p in poses]
+    run = lambda: run_visual_odometry(cam, np.arange(60) / FPS, lambda i: imgs[i])  # noqa: E731
+    a, b = run(), run()
+    assert np.array_equal(a.poses, b.poses)
+    dist = np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))
+    assert np.hypot(*_err(a.poses[-1], poses[-1])[:2]) < 0.002 * dist  # < 0.2 % of the distance
+    assert a.is_keyframe.sum() >= 2  # the keyframe was renewed along the way
+    assert all(s == VOStatus.OK for s in a.status[1:])
+    assert len(a.csv_rows()) == 61 and a.csv_rows()[0].startswith("index,timestamp,status")
+
+
+def _bad_frames():
+    blank = np.full((480, 640), 128, np.uint8)
+    nan = np.full((480, 640), np.nan, np.float32)
+    return {"blank": blank, "missing": None, "wrong size": np.zeros((240, 320), np.uint8), "nan": nan}
+
+
+def test_failed_frames_use_the_fallback_then_vision_recovers(tex):
+    cam = camera()
+    r = FloorRenderer(cam, tex, 0.001)
+    poses = _arc(40)
+    truth = between(poses[:-1], poses[1:])
+    rng = np.random.default_rng(0)
+    bad = dict(zip(range(15, 19), _bad_frames().values()))
+    vo = VisualOdometry(cam)
+    fb_cov = np.diag([1e-6, 1e-6, 1e-6])
+    ests = []
+    for i, p in enumerate(poses):
+        img = bad.get(i, None) if i in bad else r.render(p)
+        # the fallback (fused wheel/gyro) is noisy: a few mm per frame
+        fb = None if i == 0 else (truth[i - 1] + rng.normal(0, [2e-3, 2e-3, 1e-3]), fb_cov)
+        ests.append(vo.process(img, i / FPS, fallback=fb))
+    for i in bad:
+        e = ests[i]
+        assert e.status == VOStatus.FALLBACK and e.reason, (i, e.status, e.reason)
+        assert np.allclose(e.delta, ests[i].delta) and np.any(e.delta != 0)  # the fallback motion, never zero
+        assert np.all(np.diag(e.covariance) >= 4 * np.diag(fb_cov))       # inflated
+    # the next good frame is matched against the keyframe kept through the failure: no drift, no jump
+    nxt = ests[19]
+    assert nxt.status == VOStatus.OK and nxt.reference == Reference.KEYFRAME
+    assert all(e.status == VOStatus.OK for e in ests[19:])
+    assert np.hypot(*_err(vo.poses[19], poses[19])[:2]) < 1e-3
+    # the recovery motion absorbs the fallback error, and its covariance says so
+    assert np.trace(nxt.covariance[:2, :2]) > 10 * np.trace(ests[25].covariance[:2, :2])
+    assert np.all(np.isfinite(vo.poses))
+
+
+def test_without_fallback_a_failed_frame_is_lost_with_a_constant_velocity_guess(tex):
+    cam = camera()
+    r = FloorRenderer(cam, tex, 0.001)
+    poses = _arc(12)
+    vo = VisualOdometry(cam)
+    ests = [vo.process(None if i == 8 else r.render(p), i / FPS) for i, p in enumerate(poses)]
+    lost = ests[8]
+    assert lost.status == VOStatus.LOST and "no image" in lost.reason
+    assert np.allclose(lost.delta, ests[7].delta, atol=1e-3) and np.hypot(*lost.delta[:2]) > 0.005
+    assert np.sqrt(lost.covariance[0, 0]) >= VOConfig().lost_sigma_xy
+    assert ests[9].status == VOStatus.OK
+
+
+def test_blurred_frames_and_a_dropped_frame(tex):
+    cam = camera()
+    r = FloorRenderer(cam, tex, 0.001)
+    poses = _arc(30)
+    vo = VisualOdometry(cam)
+    keep = [i for i in range(30) if i != 12]  # frame 12 was dropped: frame 13 moves twice as far
+    for i in keep:
+        img = r.render(poses[i])
+        if i in (20, 21):
+            img = cv2.GaussianBlur(img, (0, 0), 6.0)  # heavy blur: vision may fail, must not crash or jump
+        est = vo.process(img, i / FPS)
+        assert est.status in ((VOStatus.INIT,) if i == 0 else (VOStatus.OK, VOStatus.LOST))
+        if i == 13:
+            assert est.status == VOStatus.OK
+    err = _err(vo.poses, poses[keep])
+    assert np.hypot(*err[:, :2].T).max() < 5e-3
+
+
+def test_textureless_start_then_texture(tex):
+    cam = camera()
+    r = FloorRenderer(cam, tex, 0.001)
+    poses = _arc(8)
+    vo = VisualOdometry(cam)
+    blank = np.full((480, 640), 90, np.uint8)
+    e0 = vo.process(blank, 0.0)
+    assert e0.status == VOStatus.INIT and not e0.is_keyframe and e0.reason
+    e1 = vo.process(r.render(poses[1]), 0.05)   # nothing to match yet: lost, but it becomes the keyframe
+    assert e1.status == VOStatus.LOST and e1.is_keyframe
+    e2 = vo.process(r.render(poses[2]), 0.10)
+    assert e2.status == VOStatus.OK
+    assert np.hypot(*_err(e2.delta, between(poses[1], poses[2]))[:2]) < 5e-4
+
+
+def test_bad_timestamps_and_config():
+    vo = VisualOdometry(camera())
+    vo.process(None, 1.0)
+    with pytest.raises(ValueError, match="does not increase"):
+        vo.process(None, 1.0)
+    with pytest.raises(ValueError, match="lk_window must be an odd"):
+        VOConfig(lk_window=16)
+    with pytest.raises(ValueError, match="unknown VOConfig field"):
+        VOConfig.from_dict({"nope": 1})
+    assert VOConfig.preset("fast").max_features < VOConfig.preset("default").max_features
+    with pytest.raises(ValueError, match="unknown VO preset"):
+        VOConfig.preset("accurate")
+    with pytest.raises(ValueError, match="downward camera"):
+        from odometry.camera import CameraModel
+        VisualOdometry(CameraModel(640, 480, 500, 500, 319.5, 239.5))
+
+
+def test_batch_survives_an_image_getter_that_raises(tex):
+    cam = camera()
+    r = FloorRenderer(cam, tex, 0.001)
+    poses = _arc(10)
+
+    def get(i):
+        if i == 4:
+            raise ValueError("frame 4: image cannot be decoded (corrupt or not an image)")
+        return r.render(poses[i])
+
+    traj = run_visual_odometry(cam, np.arange(10) / FPS, get)
+    assert traj.status[4] == VOStatus.LOST and "cannot be decoded" in traj.reason[4]
+    assert all(s == VOStatus.OK for s in traj.status[5:])
+    assert traj.poses.shape == (10, 3) and np.all(np.isfinite(traj.poses))
+
+
+def test_previous_frame_is_matched_when_the_keyframe_cannot_be(tex):
+    """If the keyframe stops matching (here: its stored template is wrecked), the previous frame is used and
+    the current frame becomes the new keyframe."""
+    cam = camera()
+    r = FloorRenderer(cam, tex, 0.001)
+    poses = _arc(12)
+    vo = VisualOdometry(cam)
+    for i in range(6):
+        assert vo.process(r.render(poses[i]), i / FPS).status in (VOStatus.INIT, VOStatus.OK)
+    noise = np.random.default_rng(0).integers(0, 256, (480, 640), dtype=np.uint8)
+    vo._kf.gray = type(vo._kf.gray)(noise, noise)  # an unmatchable template
+    est = vo.process(r.render(poses[6]), 6 / FPS)
+    assert est.status == VOStatus.OK and est.reference == Reference.PREVIOUS and est.is_keyframe
+    assert np.hypot(*_err(est.delta, between(poses[5], poses[6]))[:2]) < 3e-4
+    nxt = vo.process(r.render(poses[7]), 7 / FPS)
+    assert nxt.status == VOStatus.OK and nxt.reference == Reference.KEYFRAME and nxt.keyframe_index == 6

@@ -1,0 +1,113 @@
+"""Write a run's outputs: trajectories (TUM), loops.csv, graph.g2o, metrics.json, run.json, plots/."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from graph.formats import write_g2o
+from odometry.atomic_io import atomic_write_text
+from odometry.poses import write_tum
+from vslam.evaluation.loops import RUN_LOOPS_HEADER
+
+def _fmt(v) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, (bool, np.bool_)):
+        return "1" if v else "0"
+    if isinstance(v, float):
+        return "" if not np.isfinite(v) else f"{v:.6g}"
+    return str(v)
+
+
+def loops_csv_text(loops) -> str:
+    lines = [",".join(RUN_LOOPS_HEADER)]
+    for l in loops:
+        lines.append(",".join(_fmt(v) for v in (l.query_frame, l.match_frame, l.global_score, l.local_score,
+                                                l.probability, l.accepted, l.inlier)))
+    return "\n".join(lines) + "\n"
+
+
+def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = True, plots: bool = True) -> Path:
+    """All files of a run in `out_dir` (each written atomically). With a sequence that has ground truth, metrics.json
+    also holds ATE/RPE (SE(2) alignment), the start-to-end error and loop precision/recall."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t = result.timestamps
+    write_tum(out / "trajectory_vo.txt", t, result.poses_vo)
+    write_tum(out / "trajectory_slam.txt", t, result.poses_slam)
+    atomic_write_text(out / "loops.csv", loops_csv_text(result.loops))
+    poses = result.graph_result.poses if result.graph_result is not None else None
+    write_g2o(out / "graph.g2o", result.graph, poses)
+    run_info = {"sequence": str(Path(result.sequence).resolve()) if result.sequence else None,
+                "camera": result.camera.to_dict(), "keyframes": result.keyframes.tolist(),
+                "loop_min_separation": int(result.config.database_params().exclude_recent) + 1,
+                "config": result.config.to_dict()}
+    atomic_write_text(out / "run.json", json.dumps(run_info, indent=1) + "\n")
+    metrics = {"summary": result.summary()}
+    if result.graph_result is not None:
+        g = result.graph_result
+        metrics["graph"] = {"nodes": int(len(g.node_ids)), "loops_kept": g.loops_kept, "loops_rejected": g.loops_rejected,
+                            "initial_cost": g.initial_cost, "final_cost": g.final_cost, "iterations": g.iterations,
+                            "seconds": g.seconds}
+    if evaluate and sequence is not None and sequence.groundtruth is not None:
+        metrics["evaluation"] = _evaluate(result, sequence)
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float) + "\n")
+    if plots:
+        _plots(result, out, sequence)
+    return out
+
+
+def _evaluate(result, seq) -> dict:
+    from odometry.poses import se2_to_tum, tum_to_se3_matrices
+    from vslam.evaluation.loops import LoopTable, loop_precision_recall
+    from vslam.evaluation.metrics import evaluate, start_to_end_error
+
+    gt = seq.groundtruth
+    gtm = tum_to_se3_matrices(gt.poses)
+    out = {}
+    gt_frames = seq.groundtruth_planar()[: len(result.timestamps)]
+    for name, p in (("vo", result.poses_vo), ("slam", result.poses_slam)):
+        rep = evaluate(gt.timestamps, gtm, result.timestamps, tum_to_se3_matrices(se2_to_tum(p)), "se2")
+        d = rep.to_dict()
+        ok = ~np.isnan(gt_frames[:, 0])
+        d["start_to_end"] = start_to_end_error(p[ok], gt_frames[ok])
+        out[name] = d
+    if result.loops:
+        L = result.loops
+        table = LoopTable(np.array([l.query_frame for l in L]), np.array([l.match_frame for l in L]),
+                          np.array([l.global_score for l in L]), np.array([l.local_score for l in L]),
+                          np.array([l.probability for l in L]), np.array([l.accepted for l in L]),
+                          np.array([bool(l.inlier) for l in L]))
+        kw = dict(queried=result.keyframes, min_separation=result.config.database_params().exclude_recent + 1)
+        out["loops"] = {"accepted": loop_precision_recall(result.camera, gt_frames, table, **kw),
+                        "kept_by_back_end": loop_precision_recall(result.camera, gt_frames, table, use_inliers=True, **kw)}
+    return out
+
+
+def _plots(result, out: Path, seq) -> None:
+    from vslam.evaluation import plots
+
+    pdir = out / "plots"
+    pdir.mkdir(exist_ok=True)
+    trajs = {}
+    if seq is not None and seq.groundtruth is not None:
+        trajs["ground truth"] = seq.groundtruth_planar()[: len(result.timestamps)]
+    trajs["VO"] = result.poses_vo
+    trajs["SLAM"] = result.poses_slam
+    p = result.poses_slam
+    segs = {"accepted": [(p[l.query_frame], p[l.match_frame]) for l in result.loops if l.accepted and l.inlier],
+            "outlier": [(p[l.query_frame], p[l.match_frame]) for l in result.loops if l.accepted and not l.inlier]}
+    plots.plot_trajectories(pdir / "trajectories.png", trajs, loop_positions=segs, title=result.sequence)
+    if result.loops:
+        q = np.array([l.query_frame for l in result.loops])
+        m = np.array([l.match_frame for l in result.loops])
+        s = np.array([l.local_score for l in result.loops])
+        plots.plot_score_matrix(pdir / "loop_scores.png", q, m, s, len(result.timestamps))
+    if seq is not None and seq.groundtruth is not None:
+        gt = seq.groundtruth_planar()[: len(result.timestamps)]
+        ok = ~np.isnan(gt[:, 0])
+        series = {name: (result.timestamps[ok] - result.timestamps[0], np.linalg.norm(pp[ok, :2] - gt[ok, :2], axis=1))
+                  for name, pp in (("VO", result.poses_vo), ("SLAM", result.poses_slam))}
+        plots.plot_errors(pdir / "error_over_time.png", series, ylabel="position error, unaligned (m)")

@@ -1,0 +1,395 @@
+"""The SLAM pipeline: visual odometry -> keyframes -> compact-descriptor loops -> robust pose graph.
+
+    from vslam.pipeline import Pipeline, PipelineConfig
+    result = Pipeline(PipelineConfig()).run(open_sequence("demo/seq"))
+    result.write("demo/out")
+
+Online use: `p = Pipeline(config, camera)`, then `p.step(image, timestamp, prior)` per frame and `p.finish()`.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from loops.cdvs.codec import decode, encode
+from loops.cdvs.database import LoopDatabase
+from loops.cdvs.model import LoopModel
+from loops.cdvs.params import CdvsParams
+from odometry.camera import CameraModel
+from odometry.fusion import fuse_wheel_gyro
+from odometry.pose_cov import compose_with_covariance
+from odometry.poses import between, compose
+from odometry.vo import VisualOdometry, VOEstimate, VOStatus
+from vslam.pipeline.backend import IncrementalBuilder, PoseGraphBuilder
+from vslam.pipeline.config import PipelineConfig
+from vslam.pipeline.loop_pose import loop_pose
+
+
+@dataclass
+class LoopRecord:
+    """One verified loop candidate (a row of loops.csv)."""
+
+    query_frame: int
+    match_frame: int
+    global_score: float
+    local_score: float
+    probability: float
+    accepted: bool                    # passed the mode threshold (and confirmation)
+    n_inliers: int = 0                # descriptor matches that passed the geometric check
+    delta: np.ndarray | None = None   # pose of the query keyframe in the matched keyframe's frame
+    covariance: np.ndarray | None = None
+    pose_inliers: int = 0
+    loop_index: int | None = None     # index among the loops given to the back end
+    inlier: bool | None = None        # the back end's verdict (None: not given to it)
+
+
+@dataclass
+class FrameOutput:
+    index: int
+    timestamp: float
+    vo: VOEstimate
+    pose_vo: np.ndarray
+    pose_slam: np.ndarray
+    keyframe: bool
+    loops: list[LoopRecord]
+    timings: dict[str, float]
+
+
+@dataclass
+class PipelineResult:
+    config: PipelineConfig
+    camera: CameraModel
+    timestamps: np.ndarray
+    poses_vo: np.ndarray
+    poses_slam: np.ndarray
+    keyframes: np.ndarray             # frame indices of the keyframes (graph nodes)
+    loops: list[LoopRecord]
+    graph: object                     # graph.model.PoseGraphData
+    graph_result: object | None       # graph.result.GraphResult of the final optimisation
+    timings: dict[str, np.ndarray]    # per-frame seconds: decode, vo, loops, graph, record, frame
+    vo_status: np.ndarray             # per-frame VOStatus values
+    vo_inliers: np.ndarray
+    descriptor_bytes: np.ndarray      # per keyframe
+    wall_seconds: float = 0.0
+    sequence: str = ""
+
+    @property
+    def accepted_loops(self) -> list[LoopRecord]:
+        return [l for l in self.loops if l.accepted]
+
+    def summary(self) -> dict:
+        st = {s.value: int(np.sum(self.vo_status == s.value)) for s in VOStatus}
+        n = len(self.timestamps)
+        tm = {k: float(np.median(v)) * 1000 for k, v in self.timings.items() if len(v)}
+        acc = self.accepted_loops
+        kept = [l for l in acc if l.inlier]
+        return {"frames": n, "keyframes": int(len(self.keyframes)), "vo_status": st,
+                "loops_verified": len(self.loops), "loops_accepted": len(acc), "loops_kept": len(kept),
+                "loops_rejected_by_backend": sum(1 for l in acc if l.inlier is False),
+                "loops_without_pose": sum(1 for l in acc if l.delta is None),
+                "median_ms": tm, "wall_seconds": self.wall_seconds,
+                "frames_per_second": n / self.wall_seconds if self.wall_seconds > 0 else float("nan"),
+                "descriptor_bytes_mean": float(np.mean(self.descriptor_bytes)) if len(self.descriptor_bytes) else 0.0,
+                "descriptor_bytes_max": int(np.max(self.descriptor_bytes)) if len(self.descriptor_bytes) else 0}
+
+    def write(self, out_dir: str | Path, **kw) -> Path:
+        from vslam.pipeline.outputs import write_outputs
+
+        return write_outputs(self, out_dir, **kw)
+
+
+def _default_model():
+    """The loop model shipped with the package (None if this installation lacks it: the database then uses its
+    trained per-mode local-score threshold)."""
+    try:
+        return LoopModel.default()
+    except FileNotFoundError:
+        return None
+
+
+class Pipeline:
+    """Frame-by-frame SLAM. Create one per sequence (or call `reset`)."""
+
+    def __init__(self, config: PipelineConfig | None = None, camera: CameraModel | None = None, recorder=None):
+        self.config = config or PipelineConfig()
+        self.recorder = recorder
+        self.camera: CameraModel | None = None
+        if camera is not None:
+            self.reset(camera)
+
+    # ------------------------------------------------------------------ setup
+    def reset(self, camera: CameraModel) -> None:
+        if camera.camera_height is None:
+            raise ValueError("the SLAM pipeline needs a downward-facing camera: camera.yaml must give camera_height "
+                             "(for loop detection alone on any camera use `vslam loops`)")
+        cfg = self.config
+        self.camera = camera
+        self.vo = VisualOdometry(camera, cfg.vo)
+        lc = cfg.loops
+        self.model = LoopModel.load(lc.model) if lc.model else _default_model()
+        self.cdvs_params = CdvsParams.floor(lc.mode) if lc.floor_preset else CdvsParams.for_mode(lc.mode)
+        self.db = LoopDatabase(lc.mode, self.cdvs_params, cfg.database_params(), model=self.model) if lc.enabled else None
+        self.graph = IncrementalBuilder(cfg.graph) if cfg.incremental else PoseGraphBuilder(cfg.graph)
+        self.rng = np.random.default_rng(cfg.seed)
+        self.timestamps: list[float] = []
+        self.poses_vo: list[np.ndarray] = []
+        self.vo_status: list[str] = []
+        self.vo_inliers: list[int] = []
+        self.keyframes: list[int] = []
+        self.kf_slam: list[np.ndarray] = []     # current estimate of each keyframe
+        self.loops: list[LoopRecord] = []
+        self.graph_loops: list[LoopRecord] = []
+        self.descriptor_bytes: list[int] = []
+        self.timings: dict[str, list[float]] = {k: [] for k in ("decode", "vo", "loops", "graph", "record", "frame")}
+        self._acc_delta = np.zeros(3)            # VO motion since the last keyframe and its covariance
+        self._acc_cov = np.zeros((3, 3))
+        self._since_kf = 0
+        self._new_loops = 0
+        self._last_image = None
+        self.last_result = None
+
+    # ------------------------------------------------------------------ per frame
+    def _is_keyframe(self, index: int) -> bool:
+        if not self.keyframes:
+            return True
+        kp = self.config.keyframes
+        d = self._acc_delta
+        return (math.hypot(d[0], d[1]) >= kp.distance or abs(d[2]) >= math.radians(kp.angle_deg)
+                or self._since_kf >= kp.max_frames)
+
+    def slam_pose(self, index: int) -> np.ndarray:
+        """The current SLAM estimate of frame `index`: its keyframe's optimised pose plus VO since then."""
+        k = int(np.searchsorted(self.keyframes, index, side="right")) - 1
+        kf = self.keyframes[k]
+        return compose(self.kf_slam[k], between(self.poses_vo[kf], self.poses_vo[index]))
+
+    def step(self, image: np.ndarray | None, timestamp: float,
+             prior: tuple[np.ndarray, np.ndarray] | None = None, decode_seconds: float = 0.0) -> FrameOutput:
+        """Process one frame. `image` may be None (unreadable frame); `prior` is the wheel/gyro motion since the
+        previous frame and its covariance (the fallback when vision fails)."""
+        if self.camera is None:
+            raise RuntimeError("call reset(camera) first (or give the camera to the constructor)")
+        t_frame = time.perf_counter()
+        index = len(self.timestamps)
+        t0 = time.perf_counter()
+        est = self.vo.process(image, timestamp, fallback=prior)
+        t_vo = time.perf_counter() - t0
+        self.timestamps.append(float(timestamp))
+        pose_vo = np.asarray(est.pose, float)
+        self.poses_vo.append(pose_vo)
+        self.vo_status.append(est.status.value)
+        self.vo_inliers.append(int(est.n_inliers))
+        if index > 0:
+            self._acc_delta, self._acc_cov = compose_with_covariance(self._acc_delta, self._acc_cov, est.delta,
+                                                                     est.covariance)
+        self._since_kf += 1
+        keyframe = self._is_keyframe(index)
+        t_loops = t_graph = 0.0
+        found: list[LoopRecord] = []
+        if keyframe:
+            t_loops, t_graph, found = self._keyframe_work(index, image)
+        else:
+            self._last_image = image   # kept (one frame) so that finish() can make the last frame a keyframe
+        pose_slam = self.slam_pose(index)
+        timings = {"decode": decode_seconds, "vo": t_vo, "loops": t_loops, "graph": t_graph}
+        t0 = time.perf_counter()
+        if self.recorder is not None:
+            self._record(index, timestamp, image, est, pose_vo, pose_slam, found, timings)
+        timings["record"] = time.perf_counter() - t0
+        timings["frame"] = time.perf_counter() - t_frame + decode_seconds
+        for k, v in timings.items():
+            self.timings[k].append(v)
+        return FrameOutput(index, float(timestamp), est, pose_vo, pose_slam, keyframe, found, timings)
+
+    def _keyframe_work(self, index: int, image: np.ndarray | None) -> tuple[float, float, list[LoopRecord]]:
+        t0 = time.perf_counter()
+        self._add_keyframe(index)
+        found = self._detect_loops(index, image) if self.db is not None and image is not None else []
+        t_loops = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self._maybe_optimize()
+        self._last_image = None
+        return t_loops, time.perf_counter() - t0, found
+
+    def _add_keyframe(self, index: int) -> None:
+        if self.keyframes:
+            prev = self.keyframes[-1]
+            guess = compose(self.kf_slam[-1], self._acc_delta)
+            cov = self._acc_cov + np.diag([1e-10, 1e-10, 1e-12])    # never singular (e.g. standing still)
+            self.keyframes.append(index)
+            self.kf_slam.append(guess)
+            self.graph.add_node(index, guess)
+            self.graph.add_odometry(prev, index, between(self.poses_vo[prev], self.poses_vo[index]), cov)
+        else:
+            self.keyframes.append(index)
+            self.kf_slam.append(self.poses_vo[index].copy())
+            self.graph.add_node(index, self.poses_vo[index])
+        self._acc_delta = np.zeros(3)
+        self._acc_cov = np.zeros((3, 3))
+        self._since_kf = 0
+
+    def _detect_loops(self, index: int, image: np.ndarray) -> list[LoopRecord]:
+        lc = self.config.loops
+        data = encode(image, lc.mode, self.cdvs_params)
+        self.descriptor_bytes.append(len(data))
+        desc = decode(data)    # exactly what a robot storing the compact bytes would match against
+        cands = self.db.query(desc, frame_id=index)
+        self.db.add(index, desc)
+        out = []
+        for c in cands:
+            rec = LoopRecord(query_frame=index, match_frame=int(c.frame_id), global_score=float(c.global_score),
+                             local_score=float(c.local_score),
+                             probability=float("nan") if c.probability is None else float(c.probability),
+                             accepted=bool(c.accepted), n_inliers=int(c.n_inliers))
+            if rec.accepted:
+                lp = loop_pose(self.camera, c.match.inliers_a, c.match.inliers_b, lc.pose_threshold_px,
+                               lc.min_pose_inliers, lc.pose_pixel_sigma, self.rng)
+                if lp is not None:
+                    rec.delta, rec.covariance, rec.pose_inliers = lp.delta, lp.covariance, lp.n_inliers
+                    rec.loop_index = self.graph.add_loop(rec.match_frame, rec.query_frame, lp.delta, lp.covariance,
+                                                         rec.probability)
+                    self.graph_loops.append(rec)
+                    self._new_loops += 1
+            out.append(rec)
+        self.loops.extend(out)
+        return out
+
+    def _maybe_optimize(self, force: bool = False) -> None:
+        """Batch: re-solve after `optimize_every` new loops (and at the end). Incremental: an iSAM2 update whenever
+        loops arrived (nodes alone are batched by the back end), then the current estimate."""
+        if force:
+            self._apply(self.graph.optimize(warm_start=False))
+            self._new_loops = 0
+            return
+        if self._new_loops == 0:
+            return
+        if self.graph.incremental:
+            ids, poses = self.graph.update()
+            k = {int(f): i for i, f in enumerate(self.keyframes)}
+            for fid, p in zip(ids, poses):
+                self.kf_slam[k[int(fid)]] = np.asarray(p, float)
+            # keyframes not yet handed to iSAM2 follow their last estimated predecessor by odometry
+            for i in range(len(ids), len(self.keyframes)):
+                a, b = self.keyframes[i - 1], self.keyframes[i]
+                self.kf_slam[i] = compose(self.kf_slam[i - 1], between(self.poses_vo[a], self.poses_vo[b]))
+            inl = self.graph.loop_inliers()
+            for rec in self.graph_loops:
+                rec.inlier = bool(inl[rec.loop_index])
+            self._new_loops = 0
+            return
+        every = self.config.optimize_every
+        if every <= 0 or self._new_loops < every:
+            return
+        self.graph.set_guesses(np.asarray(self.kf_slam))
+        self._apply(self.graph.optimize(warm_start=True))
+        self._new_loops = 0
+
+    def _apply(self, res) -> None:
+        self.last_result = res
+        self.kf_slam = [p.copy() for p in res.poses]
+        for rec in self.graph_loops:
+            rec.inlier = bool(res.loop_inlier[rec.loop_index])
+
+    def finish(self) -> PipelineResult:
+        """Final optimisation over all keyframes and loops; the result of the run."""
+        last = len(self.timestamps) - 1
+        if last > 0 and self.keyframes[-1] != last:
+            # the end of the run is a keyframe too: on a closed path it is where the closing loop is found
+            _, _, found = self._keyframe_work(last, self._last_image)
+            if self.recorder is not None:
+                for l in found:
+                    if l.accepted:
+                        self.recorder.log_text(f"loop {l.query_frame} -> {l.match_frame} (end of run)")
+        t0 = time.perf_counter()
+        if len(self.keyframes) > 1:
+            self._maybe_optimize(force=True)
+        t_final = time.perf_counter() - t0
+        n = len(self.timestamps)
+        slam = np.array([self.slam_pose(i) for i in range(n)]) if n else np.zeros((0, 3))
+        timings = {k: np.asarray(v) for k, v in self.timings.items()}
+        timings["final_optimisation"] = np.array([t_final])
+        return PipelineResult(config=self.config, camera=self.camera, timestamps=np.asarray(self.timestamps),
+                              poses_vo=np.asarray(self.poses_vo).reshape(-1, 3), poses_slam=slam,
+                              keyframes=np.asarray(self.keyframes, int), loops=self.loops, graph=self.graph.data(),
+                              graph_result=self.last_result, timings=timings, vo_status=np.asarray(self.vo_status),
+                              vo_inliers=np.asarray(self.vo_inliers), descriptor_bytes=np.asarray(self.descriptor_bytes))
+
+    # ------------------------------------------------------------------ whole sequences
+    def run(self, seq, progress: Callable[[int, int], None] | None = None, max_frames: int | None = None
+            ) -> PipelineResult:
+        """Process a whole `vslam.sequence.Sequence`; wheel/gyro streams (if any) give the fallback motion."""
+        from vslam.pipeline.prefetch import prefetch
+
+        t_start = time.perf_counter()
+        self.reset(seq.require_camera())
+        n = len(seq) if max_frames is None else min(len(seq), max_frames)
+        if n == 0:
+            raise ValueError(f"{seq.root or seq.name}: the sequence has no frames")
+        priors = self._priors(seq, n)
+        if self.recorder is not None and seq.groundtruth is not None:
+            self.recorder.log_groundtruth(seq.groundtruth_planar()[:n])
+        for fr in prefetch(seq, gray=True, stop=n):
+            prior = None if priors is None or fr.index == 0 else priors(fr.index)
+            self.step(fr.image, fr.timestamp, prior, decode_seconds=fr.decode_seconds)
+            if fr.error and self.recorder is not None:
+                self.recorder.log_text(f"frame {fr.index}: {fr.error}", "WARN")
+            if progress is not None:
+                progress(fr.index + 1, n)
+        result = self.finish()
+        result.wall_seconds = time.perf_counter() - t_start
+        result.sequence = str(seq.root or seq.name)
+        if self.recorder is not None:
+            self.recorder.replace_trajectory("slam", result.poses_slam)
+            self._record_final_loops(result)
+        return result
+
+    def _priors(self, seq, n: int):
+        """relative(i-1, i) of the fused wheel/gyro trajectory at the frame times, or None without streams."""
+        odo, imu = seq.odometry, seq.imu
+        if odo is None and imu is None:
+            return None
+        fused = fuse_wheel_gyro(None if odo is None else odo.timestamps, None if odo is None else odo.v,
+                                None if odo is None else odo.omega, None if imu is None else imu.timestamps,
+                                None if imu is None else imu.gyro_z, seq.timestamps[:n], self.config.fusion)
+        return lambda i: fused.relative(i - 1, i)
+
+    # ------------------------------------------------------------------ recording
+    def _record(self, index, timestamp, image, est: VOEstimate, pose_vo, pose_slam, found, timings) -> None:
+        r = self.recorder
+        r.set_frame(index, timestamp)
+        if image is not None:
+            m = est.matches
+            pair = None
+            if m is not None and len(m) and est.inliers is not None and len(est.inliers) == len(m):
+                inl = m[np.asarray(est.inliers, bool)]
+                pair = (inl[:, 0:2], inl[:, 2:4])
+            r.log_image(index, image, keypoints=est.keypoints, matches=pair)
+        r.log_pose(pose_vo, "vo")
+        r.log_pose(pose_slam, "slam")
+        vals = {"vo/inliers": est.n_inliers, "vo/inlier_ratio": est.inlier_ratio,
+                "timing/vo_ms": timings["vo"] * 1000, "timing/loops_ms": timings["loops"] * 1000,
+                "timing/graph_ms": timings["graph"] * 1000,
+                "timing/frame_ms": (sum(timings.values())) * 1000}
+        if found:
+            best = max(found, key=lambda l: l.local_score)
+            vals.update({"loops/local_score": best.local_score, "loops/global_score": best.global_score,
+                         "loops/probability": best.probability})
+        r.log_scalars(**vals)
+        for l in found:
+            if l.accepted:   # candidates below threshold show in the score time series, not as edges
+                r.log_loop(self.slam_pose(l.query_frame), self.slam_pose(l.match_frame), True)
+                r.log_text(f"loop {l.query_frame} -> {l.match_frame}: local score {l.local_score:.1f}, "
+                           f"P = {l.probability:.2f}, {l.pose_inliers} pose inliers")
+        if est.status not in (VOStatus.OK, VOStatus.INIT):
+            r.log_text(f"frame {index}: VO {est.status.value} ({est.reason})", "WARN")
+
+    def _record_final_loops(self, result: PipelineResult) -> None:
+        p = result.poses_slam
+        acc = [(p[l.query_frame], p[l.match_frame]) for l in result.loops if l.accepted and l.inlier]
+        rej = [(p[l.query_frame], p[l.match_frame]) for l in result.loops if not (l.accepted and l.inlier)]
+        self.recorder.set_loops([np.array(a)[:, :2] for a in acc], [np.array(r)[:, :2] for r in rej])
