@@ -187,8 +187,25 @@ def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: 
         res.init_seconds += gate_seconds
         res.init = f"gated iSAM2 pass ({int(admitted.sum())} of {len(admitted)} loops admitted)"
         res.notes.insert(0, f"gate pass {gate_seconds:.3f} s: {int((~admitted).sum())} loops deferred")
+        if res.loop_inlier.sum() < params.gate_fallback_share * admitted.sum():
+            # the robust solve threw out most of what the gate admitted: the gate's estimate was a bad start
+            # (sphere2500 at 10 %: every loop rejected). Solve without the gate; keep the lower TLS objective.
+            alt = solve(data, params)
+            alt.seconds += res.seconds
+            if _tls_objective(data, alt, params) < _tls_objective(data, res, params):
+                alt.notes.insert(0, f"gated solve kept {int(res.loop_inlier.sum())} of {int(admitted.sum())} "
+                                    "admitted loops: solved without the gate")
+                return alt
         return res
     return solve(data, params)
+
+
+def _tls_objective(data: PoseGraphData, res: GraphResult, params: GraphParams) -> float:
+    """cost(prior + odometry) + sum over loops of min(r^2, c^2) / 2 at the result (stated thresholds)."""
+    c2 = loop_thresholds(data.probability[res.loop_edges], TANGENT_DIM[data.dim], params)
+    r2 = np.asarray(res.loop_residual, float)
+    base = res.final_cost - 0.5 * float(r2[res.loop_inlier].sum())     # final_cost: prior + odometry + kept loops
+    return base + 0.5 * float(np.minimum(r2, c2).sum())
 
 
 def solve(data: PoseGraphData, params: GraphParams, candidates: np.ndarray | None = None) -> GraphResult:
@@ -297,7 +314,11 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
         if budget[0] <= 0:
             return _lm(built.graph(labels), values, params)       # budget spent: warm start only
         budget[0] -= 1
-        guess = values_from_array(data.dim, initial_guess(data, built.subset(labels), method))
+        try:
+            guess = values_from_array(data.dim, initial_guess(data, built.subset(labels), method))
+        except RuntimeError:
+            # the chordal relaxation can be indeterminate for some loop subsets (sphere2500): warm start instead
+            return _lm(built.graph(labels), values, params)
         return _lm(built.graph(labels), guess, params)
 
     r2 = squared_residuals(built.loops, values)

@@ -106,7 +106,10 @@ class GraphParams:
     #                                      node 6500, 2000 false loops admitted, then minutes per iSAM2 update).
     #                                      Measured on w10000 at 50 %: 1 -> 55 false admitted, 2 -> 139, 4 -> 1612
     gate_kernel_factor: float = 4.0      # online kernel width^2 <= this x the gate's quantile of arrival r^2
-    gate_min_loops: int = 20             # before this many admitted loops, only the stated model gates
+    gate_fallback_share: float = 0.5     # robust solve kept fewer than this share of the admitted loops: also
+    #                                      solve ungated, keep the lower TLS objective
+    gate_min_loops: int = 20             # until this many loops have arrived they are held (pending), then gated
+    #                                      together; the final flush gates whatever has arrived on the stated model
     # --- iSAM2
     isam2_relinearize_threshold: float = 0.1
     isam2_relinearize_skip: int = 10
