@@ -24,7 +24,7 @@ from scipy.stats import chi2
 import gtsam
 from graph.factors import (NoiseCache, array_from_values, from_pose, graph_of, gtsam_information, squared_residuals,
                            to_pose, values_from_array)
-from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, information_from
+from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, checked_edge, information_from
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult
 from graph.thresholds import fence_scale, loop_thresholds
@@ -188,14 +188,7 @@ class IncrementalPoseGraph:
         self._drift[kj] = (ki, ad, q)
 
     def _edge_args(self, i, j, delta, cov, information):
-        for n in (i, j):
-            if int(n) not in self._key:
-                raise KeyError(f"unknown node id {int(n)}: add_node first")
-        if int(i) == int(j):
-            raise ValueError(f"edge from node {int(i)} to itself")
-        z = np.asarray(delta, float).reshape(POSE_WIDTH[self.dim])
-        if not np.all(np.isfinite(z)):
-            raise ValueError("delta must be finite")
+        i, j, z = checked_edge(i, j, delta, self._key, self.dim)
         m = np.asarray(information if cov is None else cov, float)
         key = m.tobytes() + (b"c" if cov is not None else b"i")
         info = self._info_ok.get(key)            # validation and inversion once per distinct matrix
@@ -203,7 +196,7 @@ class IncrementalPoseGraph:
             info = information_from(cov, information, TANGENT_DIM[self.dim])
             if len(self._info_ok) < 10000:
                 self._info_ok[key] = info
-        return self._key[int(i)], self._key[int(j)], z, info
+        return self._key[i], self._key[j], z, info
 
     def _robust(self, factor):
         """The loop factor behind the online kernel. Its width follows the arrival residuals: a kernel of width 1 in

@@ -139,6 +139,21 @@ class PoseGraphData:
                 and np.allclose(self.probability, other.probability, rtol=rtol, atol=atol, equal_nan=True))
 
 
+def checked_edge(i, j, delta, known, dim: int) -> tuple[int, int, np.ndarray]:
+    """(i, j, delta as a float pose vector) of a new edge, after the checks every graph front end makes: both
+    nodes added (`known` supports `in`), no self-edge, a finite delta of the right width."""
+    i, j = int(i), int(j)
+    for n in (i, j):
+        if n not in known:
+            raise KeyError(f"unknown node id {n}: add_node first")
+    if i == j:
+        raise ValueError(f"edge from node {i} to itself")
+    z = np.asarray(delta, float).reshape(POSE_WIDTH[dim])
+    if not np.all(np.isfinite(z)):
+        raise ValueError("delta must be finite")
+    return i, j, z
+
+
 def information_from(cov: np.ndarray | None, information: np.ndarray | None, d: int) -> np.ndarray:
     """The information matrix from exactly one of a covariance or an information matrix (d x d, symmetric,
     positive definite); ValueError naming the problem otherwise."""

@@ -6,7 +6,7 @@ import os
 import numpy as np
 
 from graph.formats import read_graph
-from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, information_from
+from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, checked_edge, information_from
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult, write_g2o
 
@@ -99,16 +99,9 @@ class PoseGraph:
         return self._loop_count - 1
 
     def _add(self, i, j, delta, cov, information, is_loop, p) -> int:
-        for n in (i, j):
-            if int(n) not in self._index:
-                raise KeyError(f"unknown node id {int(n)}: add_node first")
-        if int(i) == int(j):
-            raise ValueError(f"edge from node {int(i)} to itself")
-        z = np.asarray(delta, float).reshape(POSE_WIDTH[self.dim])
-        if not np.all(np.isfinite(z)):
-            raise ValueError("delta must be finite")
-        self._from.append(int(i))
-        self._to.append(int(j))
+        i, j, z = checked_edge(i, j, delta, self._index, self.dim)
+        self._from.append(i)
+        self._to.append(j)
         self._z.append(z)
         self._info.append(information_from(cov, information, TANGENT_DIM[self.dim]))
         self._loop.append(is_loop)
