@@ -330,8 +330,12 @@ class IncrementalPoseGraph:
             measured.append((s, r2))
         level = self.gate_level(final)
         if level is None:
-            self._held = [s for s, _ in measured]
-            return admitted
+            if not self.params.gate_warmup_stated:
+                self._held = [s for s, _ in measured]
+                return admitted
+            self._held = [s for s, r2 in measured if r2 > self._gate_c2[s]]
+            measured = [(s, r2) for s, r2 in measured if r2 <= self._gate_c2[s]]
+            level = float("inf")
         for s, r2 in measured:
             # never looser than the stated model (gate_c2), tightened to the empirical level; a loop's probability
             # shifts both through its threshold

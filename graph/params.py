@@ -110,6 +110,10 @@ class GraphParams:
     #                                      solve ungated, keep the lower TLS objective
     gate_min_loops: int = 20             # until this many loops have arrived they are held (pending), then gated
     #                                      together; the final flush gates whatever has arrived on the stated model
+    gate_warmup_stated: bool = False     # during that warm-up, admit at once the loops that pass the stated gate
+    #                                      (the others wait): for online use with few loops already verified
+    #                                      upstream (the pipeline's --incremental); off for public graphs, whose
+    #                                      stated noise is too loose to tell false loops by it
     # --- iSAM2
     isam2_relinearize_threshold: float = 0.1
     isam2_relinearize_skip: int = 10
