@@ -30,7 +30,6 @@ from graph.result import GraphResult
 from graph.thresholds import fence_scale, loop_thresholds
 
 PENDING, ADMITTED, DEFERRED, REJECTED = 0, 1, 2, 3
-_ARRIVAL_LOG: list | None = None       # debugging aid: (loop slot, arrival r^2) of every gated loop
 
 
 def _isam_params(params: GraphParams, factorization: str) -> gtsam.ISAM2Params:
@@ -325,8 +324,6 @@ class IncrementalPoseGraph:
             if s not in self._counted:
                 self._counted.add(s)
                 self._arrival_r2.append(r2)
-                if _ARRIVAL_LOG is not None:
-                    _ARRIVAL_LOG.append((s, r2))
             measured.append((s, r2))
         level = self.gate_level(final)
         if level is None:
