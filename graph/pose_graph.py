@@ -74,6 +74,14 @@ class PoseGraph:
         self._ids.append(node_id)
         self._guess.append(g)
 
+    def set_guesses(self, poses: np.ndarray) -> None:
+        """Replace every node's guess (one row per node, in the order added), e.g. with the previous solution
+        before a warm-started solve (`optimize(init="given")`)."""
+        g = np.asarray(poses, float).reshape(len(self._ids), POSE_WIDTH[self.dim])
+        if not np.all(np.isfinite(g)):
+            raise ValueError("guesses must be finite")
+        self._guess = list(g.copy())
+
     def anchor(self, node_id: int) -> None:
         """Hold this node at its guess (identity without one); by default the first node is the anchor."""
         if int(node_id) not in self._index:

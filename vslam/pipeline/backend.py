@@ -3,71 +3,46 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph.batch import optimize
 from graph.incremental import IncrementalPoseGraph
 from graph.model import PoseGraphData
 from graph.params import GraphParams, InitMethod
+from graph.pose_graph import PoseGraph
 from graph.result import GraphResult
 
 
-def _information(cov: np.ndarray) -> np.ndarray:
-    c = 0.5 * (np.asarray(cov, float) + np.asarray(cov, float).T)
+def _floored(cov: np.ndarray) -> np.ndarray:
     # a floor keeps a degenerate covariance (e.g. an exactly repeated fallback) invertible
-    return np.linalg.inv(c + np.eye(3) * 1e-12)
+    return np.asarray(cov, float) + np.eye(3) * 1e-12
 
 
 class PoseGraphBuilder:
-    """Planar pose graph over keyframes (node id = frame index), solved in batch."""
+    """Planar pose graph over keyframes (node id = frame index), solved in batch (graph.PoseGraph)."""
 
     incremental = False
 
     def __init__(self, params: GraphParams):
-        self.params = params
-        self.ids: list[int] = []
-        self.guess: list[np.ndarray] = []
-        self.e_from: list[int] = []
-        self.e_to: list[int] = []
-        self.z: list[np.ndarray] = []
-        self.info: list[np.ndarray] = []
-        self.is_loop: list[bool] = []
-        self.prob: list[float] = []
-        self.n_loops = 0
+        self.graph = PoseGraph(2, params)
 
     def add_node(self, frame: int, guess: np.ndarray) -> None:
-        self.ids.append(int(frame))
-        self.guess.append(np.asarray(guess, float).copy())
+        self.graph.add_node(int(frame), guess)
 
     def set_guesses(self, poses: np.ndarray) -> None:
-        self.guess = [np.asarray(p, float).copy() for p in poses]
-
-    def _edge(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray, loop: bool, p: float) -> None:
-        self.e_from.append(int(i))
-        self.e_to.append(int(j))
-        self.z.append(np.asarray(delta, float).copy())
-        self.info.append(_information(cov))
-        self.is_loop.append(loop)
-        self.prob.append(float(p))
+        self.graph.set_guesses(poses)
 
     def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray) -> None:
-        self._edge(i, j, delta, cov, False, 1.0)
+        self.graph.add_odometry(int(i), int(j), delta, _floored(cov))
 
     def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray, probability: float | None) -> int:
         """Loop from node i (the earlier keyframe) to node j; returns its index among the loops."""
-        self._edge(i, j, delta, cov, True, 1.0 if probability is None or not np.isfinite(probability) else probability)
-        self.n_loops += 1
-        return self.n_loops - 1
+        p = 1.0 if probability is None or not np.isfinite(probability) else float(probability)
+        return self.graph.add_loop(int(i), int(j), delta, _floored(cov), probability=p)
 
     def data(self) -> PoseGraphData:
-        m = len(self.e_from)
-        return PoseGraphData(2, np.asarray(self.ids, np.int64), np.asarray(self.guess).reshape(-1, 3),
-                             np.asarray(self.e_from, np.int64), np.asarray(self.e_to, np.int64),
-                             np.asarray(self.z).reshape(m, 3), np.asarray(self.info).reshape(m, 3, 3),
-                             np.asarray(self.is_loop, bool), np.asarray(self.prob, float))
+        return self.graph.to_data()
 
     def optimize(self, warm_start: bool = False) -> GraphResult:
         """Batch solve. warm_start: begin from the current guesses (the previous solution + odometry)."""
-        init = InitMethod.GIVEN if warm_start else None
-        return optimize(self.data(), self.params, init=init)
+        return self.graph.optimize(init=InitMethod.GIVEN if warm_start else None)
 
 
 class IncrementalBuilder:
@@ -86,12 +61,12 @@ class IncrementalBuilder:
         self.graph.add_node(int(frame), guess)
 
     def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray) -> None:
-        self.graph.add_odometry(int(i), int(j), delta, cov + np.eye(3) * 1e-12)
+        self.graph.add_odometry(int(i), int(j), delta, _floored(cov))
 
     def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray, probability: float | None) -> int:
         p = None if probability is None or not np.isfinite(probability) else float(probability)
         self.n_loops += 1
-        return self.graph.add_loop(int(i), int(j), delta, cov + np.eye(3) * 1e-12, probability=p)
+        return self.graph.add_loop(int(i), int(j), delta, _floored(cov), probability=p)
 
     def update(self) -> tuple[np.ndarray, np.ndarray]:
         """Insert what is pending; (node ids, poses) of the current estimate."""
