@@ -16,7 +16,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
 import gtsam
 from graph.factors import (NoiseCache, anchor_nodes, array_from_values, between_factors, graph_of, prior_factors,

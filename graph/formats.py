@@ -30,7 +30,7 @@ import numpy as np
 
 from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, classify_edges
 from odometry.atomic_io import atomic_write_text
-from odometry.poses import quat_to_rotmat, rotmat_to_quat
+from odometry.poses import quat_to_rotmat
 
 
 class GraphFormatError(ValueError):
@@ -213,7 +213,7 @@ def _is_float(s: str) -> bool:
 
 
 def _assemble(path, fmt, dim, info_order, v_ids, v_vals, v_lines, e_vals, e_lines, fixed, comments, extras, layout):
-    w, d = POSE_WIDTH[dim], TANGENT_DIM[dim]
+    w = POSE_WIDTH[dim]
     v_ids = np.asarray(v_ids, np.int64)
     uniq, first = np.unique(v_ids, return_index=True)
     if len(uniq) != len(v_ids):

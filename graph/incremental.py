@@ -27,7 +27,7 @@ from graph.factors import (NoiseCache, array_from_values, from_pose, graph_of, g
 from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, checked_edge, information_from
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult
-from graph.thresholds import fence_scale, loop_thresholds
+from graph.thresholds import loop_thresholds
 
 PENDING, ADMITTED, DEFERRED, REJECTED = 0, 1, 2, 3
 

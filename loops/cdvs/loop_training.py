@@ -14,7 +14,6 @@ import numpy as np
 
 from loops.cdvs.codec import decode, encode_all_modes
 from loops.cdvs.database import LoopDatabase
-from loops.cdvs.groundtruth import pair_overlaps
 from loops.cdvs.match import match
 from loops.cdvs.model import LoopModel, fit_curve
 from loops.cdvs.params import MODES, CdvsParams

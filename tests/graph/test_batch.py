@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from graph import GraphParams, PoseGraph, inject_false_loops, loop_scores, optimize
-from odometry.poses import between, compose
+from odometry.poses import between
 from tests.graph.synth import ate, noisy_graph, square_laps
 
 COV = np.diag([0.01 ** 2, 0.01 ** 2, 0.005 ** 2])

@@ -1,6 +1,4 @@
 """Sequence directory format: exact schema, validation errors, writers and public-format readers."""
-import math
-import shutil
 from pathlib import Path
 
 import cv2
