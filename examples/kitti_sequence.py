@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from loops.cdvs import decode, encode, match
-from odometry.poses import tum_to_se3_matrices
+from odometry.shared.tum import tum_to_se3_matrices
 from vslam.cli.cmd_info import summary
 from vslam.cli.main import main as vslam_cli
 from vslam.evaluation import evaluate

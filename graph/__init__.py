@@ -11,11 +11,19 @@
 `classify_loops()`. `read_graph` / `write_graph` read and write g2o and TORO files; `optimize(data, params)`
 solves a `PoseGraphData`. See README, section graph, for the design and the measurements behind the defaults.
 """
-from graph.batch import optimize
-from graph.formats import (GraphFormatError, format_g2o, format_toro, read_g2o, read_graph, read_toro, write_graph,
-                           write_toro)
+from graph.formats import (
+                           GraphFormatError,
+                           format_g2o,
+                           format_toro,
+                           read_g2o,
+                           read_graph,
+                           read_toro,
+                           write_graph,
+                           write_toro,
+)
 from graph.incremental import IncrementalPoseGraph
 from graph.model import PoseGraphData, classify_edges
+from graph.optimizer import optimize
 from graph.outliers import LoopScores, inject_false_loops, loop_scores
 from graph.params import GncImpl, GncLoss, GraphParams, InitMethod, LoopWeighting, RobustMode, Solver
 from graph.pose_graph import PoseGraph

@@ -15,16 +15,26 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import gtsam
 import numpy as np
 
-import gtsam
-from graph.factors import (NoiseCache, anchor_nodes, array_from_values, between_factors, graph_of, prior_factors,
-                           squared_residuals, to_pose, values_from_array)
 from graph.consistency import isolated, standardized_residuals
+from graph.errors import GraphError
+from graph.factors import (
+    NoiseCache,
+    anchor_nodes,
+    array_from_values,
+    between_factors,
+    graph_of,
+    prior_factors,
+    squared_residuals,
+    to_pose,
+    values_from_array,
+)
 from graph.gnc import gnc_optimize
 from graph.initial import chordal_guess, lago_guess, spanning_tree_guess
 from graph.model import TANGENT_DIM, PoseGraphData
-from graph.params import GncImpl, GncLoss, GraphParams, InitMethod, RobustMode, Solver
+from graph.params import GncImpl, GncLoss, GraphParams, InitMethod, RobustMode
 from graph.result import GraphResult
 from graph.thresholds import fence_scale, information_scale, loop_thresholds
 
@@ -37,9 +47,9 @@ def resolve_init(data: PoseGraphData, params: GraphParams) -> InitMethod:
             return InitMethod.LAGO if data.dim == 2 else InitMethod.CHORDAL
         return InitMethod.ODOMETRY
     if m == InitMethod.LAGO and data.dim != 2:
-        raise ValueError("LAGO initialisation is for planar (2D) graphs; use chordal or odometry for 3D")
+        raise GraphError("LAGO initialisation is for planar (2D) graphs; use chordal or odometry for 3D")
     if m == InitMethod.CHORDAL and data.dim != 3:
-        raise ValueError("chordal initialisation is for 3D graphs; use lago or odometry for 2D")
+        raise GraphError("chordal initialisation is for 3D graphs; use lago or odometry for 2D")
     return m
 
 
@@ -156,55 +166,6 @@ def mestimator_weights(r2: np.ndarray, mode: RobustMode, params: GraphParams) ->
     if mode == RobustMode.CAUCHY:
         return 1.0 / (1.0 + (r / params.cauchy_k) ** 2)
     return np.ones_like(r)
-
-
-def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: Solver | str | None = None,
-             robust: RobustMode | str | None = None, init: InitMethod | str | None = None) -> GraphResult:
-    """Optimise a pose graph; keyword arguments override the corresponding `params` fields."""
-    over = {k: v for k, v in (("solver", solver), ("robust", robust), ("init", init)) if v is not None}
-    params = (params or GraphParams.default()).with_(**over)
-    if data.num_nodes == 0:
-        raise ValueError("the pose graph has no nodes")
-    from graph import incremental
-
-    if params.solver == Solver.ISAM2:
-        return incremental.full_pass(data, params)
-    if params.robust != RobustMode.NONE and params.gate_loops and data.num_loops:
-        t0 = time.perf_counter()
-        try:
-            estimate, admitted = incremental.gate_pass(data, params)
-        except (ValueError, RuntimeError) as exc:
-            # a node order the replay cannot follow (a node linked only to later nodes): solve ungated
-            res = solve(data, params)
-            res.notes.insert(0, f"gate pass impossible, solved without it: {exc}".splitlines()[0])
-            return res
-        gate_seconds = time.perf_counter() - t0
-        seeded = data.copy()
-        seeded.poses = estimate
-        res = solve(seeded, params.with_(init=InitMethod.GIVEN), candidates=admitted)
-        res.seconds += gate_seconds
-        res.init_seconds += gate_seconds
-        res.init = f"gated iSAM2 pass ({int(admitted.sum())} of {len(admitted)} loops admitted)"
-        res.notes.insert(0, f"gate pass {gate_seconds:.3f} s: {int((~admitted).sum())} loops deferred")
-        if res.loop_inlier.sum() < params.gate_fallback_share * admitted.sum():
-            # the robust solve threw out most of what the gate admitted: the gate's estimate was a bad start
-            # (sphere2500 at 10 %: every loop rejected). Solve without the gate; keep the lower TLS objective.
-            alt = solve(data, params)
-            alt.seconds += res.seconds
-            if _tls_objective(data, alt, params) < _tls_objective(data, res, params):
-                alt.notes.insert(0, f"gated solve kept {int(res.loop_inlier.sum())} of {int(admitted.sum())} "
-                                    "admitted loops: solved without the gate")
-                return alt
-        return res
-    return solve(data, params)
-
-
-def _tls_objective(data: PoseGraphData, res: GraphResult, params: GraphParams) -> float:
-    """cost(prior + odometry) + sum over loops of min(r^2, c^2) / 2 at the result (stated thresholds)."""
-    c2 = loop_thresholds(data.probability[res.loop_edges], TANGENT_DIM[data.dim], params)
-    r2 = np.asarray(res.loop_residual, float)
-    base = res.final_cost - 0.5 * float(r2[res.loop_inlier].sum())     # final_cost: prior + odometry + kept loops
-    return base + 0.5 * float(np.minimum(r2, c2).sum())
 
 
 def solve(data: PoseGraphData, params: GraphParams, candidates: np.ndarray | None = None) -> GraphResult:

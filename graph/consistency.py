@@ -9,10 +9,9 @@ do not.
 """
 from __future__ import annotations
 
+import gtsam
 import numpy as np
 from scipy.spatial import cKDTree
-
-import gtsam
 
 
 def isolated(pos_a: np.ndarray, pos_b: np.ndarray, kept: np.ndarray, window: int) -> np.ndarray:

@@ -5,11 +5,11 @@ Node at position k in `data.node_ids` is gtsam key k. 3D information matrices ar
 """
 from __future__ import annotations
 
+import gtsam
 import numpy as np
 
-import gtsam
 from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData
-from odometry.poses import rotmat_to_quat
+from odometry.shared.rotations import rotmat_to_quat
 
 _PERM_3D = np.array([3, 4, 5, 0, 1, 2])
 

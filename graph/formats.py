@@ -28,12 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
+from graph.errors import GraphError
 from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, classify_edges
-from odometry.atomic_io import atomic_write_text
-from odometry.poses import quat_to_rotmat
+from odometry.shared.atomic_io import atomic_write_text
+from odometry.shared.rotations import quat_to_rotmat
 
 
-class GraphFormatError(ValueError):
+class GraphFormatError(GraphError):
     """A malformed pose-graph file; the message names file:line and the problem."""
 
     def __init__(self, path: str | os.PathLike, line: int | None, problem: str):

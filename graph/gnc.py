@@ -9,16 +9,15 @@ measurement). It also takes one inlier threshold per loop, which is how a loop's
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
+import gtsam
 import numpy as np
 
-import gtsam
 from graph.factors import squared_residuals
 from graph.params import GncLoss
 
-
-import os
 _DEBUG = bool(os.environ.get("GRAPH_GNC_DEBUG"))
 
 

@@ -18,12 +18,21 @@ from __future__ import annotations
 import time
 from collections import deque
 
+import gtsam
 import numpy as np
 from scipy.stats import chi2
 
-import gtsam
-from graph.factors import (NoiseCache, array_from_values, from_pose, graph_of, gtsam_information, squared_residuals,
-                           to_pose, values_from_array)
+from graph.batch import build, mestimator_weights, solve
+from graph.factors import (
+    NoiseCache,
+    array_from_values,
+    from_pose,
+    graph_of,
+    gtsam_information,
+    squared_residuals,
+    to_pose,
+    values_from_array,
+)
 from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, checked_edge, information_from
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult
@@ -469,8 +478,6 @@ class IncrementalPoseGraph:
         self.update(final=True)
         if not self._loop_edge or self.params.robust == RobustMode.NONE:
             return self.loop_inliers()
-        from graph.batch import solve
-
         t0 = time.perf_counter()
         cand = self.loop_inliers()
         res = solve(self.to_data(), self.params.with_(solver=Solver.LM, init=InitMethod.GIVEN), candidates=cand)
@@ -512,8 +519,6 @@ class IncrementalPoseGraph:
             self.updates += self.params.isam2_final_steps
             self._estimate = None
         data = self.to_data()
-        from graph.batch import build, mestimator_weights
-
         built = build(data, self.params.with_(solver=Solver.LM))
         values = values_from_array(self.dim, data.poses)
         r2 = squared_residuals(built.loops, values)

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 from collections import deque
 
+import gtsam
 import numpy as np
 
-import gtsam
 from graph.factors import array_from_values, from_pose, to_pose
 from graph.model import POSE_WIDTH, PoseGraphData
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, replace
 
+from odometry.shared.errors import ConfigError
+
 
 class RobustMode(str, enum.Enum):
     """How loop closures are protected against false positives (odometry is always trusted)."""
@@ -153,10 +155,10 @@ class GraphParams:
 
     def __post_init__(self) -> None:
         if not 0.5 < self.inlier_probability < 1.0:
-            raise ValueError(f"inlier_probability must be in (0.5, 1), got {self.inlier_probability}")
+            raise ConfigError(f"inlier_probability must be in (0.5, 1), got {self.inlier_probability}")
         if self.gnc_mu_step <= 1.0:
-            raise ValueError(f"gnc_mu_step must be > 1, got {self.gnc_mu_step}")
+            raise ConfigError(f"gnc_mu_step must be > 1, got {self.gnc_mu_step}")
         if self.isam2_batch_nodes < 1:
-            raise ValueError(f"isam2_batch_nodes must be >= 1, got {self.isam2_batch_nodes}")
+            raise ConfigError(f"isam2_batch_nodes must be >= 1, got {self.isam2_batch_nodes}")
         if not 0.0 < self.probability_clip < 0.5:
-            raise ValueError(f"probability_clip must be in (0, 0.5), got {self.probability_clip}")
+            raise ConfigError(f"probability_clip must be in (0, 0.5), got {self.probability_clip}")

@@ -136,7 +136,7 @@ class PoseGraph:
     def optimize(self, solver: Solver | str | None = None, robust: RobustMode | str | None = None,
                  init: InitMethod | str | None = None) -> GraphResult:
         """Solve with `params` (keyword arguments override solver / robust mode / initial guess)."""
-        from graph.batch import optimize
+        from graph.optimizer import optimize
 
         return optimize(self.to_data(), self.params, solver=solver, robust=robust, init=init)
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from graph.formats import write_graph
 from graph.model import PoseGraphData
-from odometry.poses import write_tum as _write_tum
+from odometry.shared.tum import write_tum as _write_tum
 
 
 @dataclass

@@ -1,18 +1,17 @@
 """Frame-to-frame motion for ground robots, and the floor geometry every package shares.
 
-- `odometry.camera.CameraModel`: pinhole + distortion, pixel <-> floor mapping for a downward camera.
-- `odometry.poses`: planar pose composition and TUM conversions.
-- `odometry.footprint`: image footprints on the floor and their overlap J.
+- `odometry.shared`: the primitives every package shares (pose math, rotations, TUM files, atomic writes,
+  `CameraModel` and floor footprints, configuration, the error root); `loops` and `graph` import only these.
 - `odometry.fusion`: wheel odometry + gyro EKF (filterpy) -> poses, covariances, relative motions.
 - `odometry.vo`: downward-camera visual odometry (`VisualOdometry`, `run_visual_odometry`), built on
   `odometry.rigid` (Kabsch/SVD + RANSAC), `odometry.tilt_refine` and `odometry.tracking` (LK front end).
 """
-from odometry.camera import CameraModel
-from odometry.footprint import footprint_overlap, footprint_polygon, overlap_matrix, overlap_pairs
 from odometry.fusion import FusedTrajectory, FusionConfig, fuse_wheel_gyro
-from odometry.poses import between, compose, integrate, inverse, relative_motions, wrap_angle
 from odometry.rigid import RigidFit, kabsch_2d, ransac_rigid_2d
-from odometry.vo import VOConfig, VOEstimate, VOStatus, VOTrajectory, VisualOdometry, run_visual_odometry
+from odometry.shared.camera import CameraModel
+from odometry.shared.footprint import footprint_overlap, footprint_polygon, overlap_matrix, overlap_pairs
+from odometry.shared.poses import between, compose, integrate, inverse, relative_motions, wrap_angle
+from odometry.vo import VisualOdometry, VOConfig, VOEstimate, VOStatus, VOTrajectory, run_visual_odometry
 
 __all__ = ["CameraModel", "FusedTrajectory", "FusionConfig", "RigidFit", "VOConfig", "VOEstimate", "VOStatus",
            "VOTrajectory", "VisualOdometry", "between", "compose", "footprint_overlap", "footprint_polygon",

@@ -41,8 +41,10 @@ from enum import Enum
 
 import numpy as np
 
-from odometry.pose_cov import between_jacobians
-from odometry.poses import between, wrap_angle
+from odometry.errors import OdometryError
+from odometry.shared.errors import ConfigError
+from odometry.shared.pose_covariance import between_jacobians
+from odometry.shared.poses import arc_chord, between, wrap_angle
 
 __all__ = ["FusionConfig", "FusedTrajectory", "Interpolation", "fuse_wheel_gyro"]
 
@@ -105,11 +107,11 @@ class FusionConfig:
             if f.name == "interpolation":
                 continue
             if not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"FusionConfig.{f.name} must be a finite number, got {v!r}")
+                raise ConfigError(f"FusionConfig.{f.name} must be a finite number, got {v!r}")
             if f.name != "gyro_bias0" and v < 0:
-                raise ValueError(f"FusionConfig.{f.name} must be >= 0, got {v}")
+                raise ConfigError(f"FusionConfig.{f.name} must be >= 0, got {v}")
         if self.max_gap <= 0:
-            raise ValueError(f"FusionConfig.max_gap must be > 0, got {self.max_gap}")
+            raise ConfigError(f"FusionConfig.max_gap must be > 0, got {self.max_gap}")
 
     # ------------------------------------------------------------------ presets
     @classmethod
@@ -133,7 +135,7 @@ class FusionConfig:
     def preset(cls, name: str) -> "FusionConfig":
         presets = {"default": cls.default, "precise": cls.precise, "slippery": cls.slippery}
         if name not in presets:
-            raise ValueError(f"unknown fusion preset {name!r}; choose one of {', '.join(presets)}")
+            raise ConfigError(f"unknown fusion preset {name!r}; choose one of {', '.join(presets)}")
         return presets[name]()
 
     def to_dict(self) -> dict:
@@ -147,7 +149,7 @@ class FusionConfig:
         names = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - names)
         if unknown:
-            raise ValueError(f"unknown FusionConfig field(s): {', '.join(unknown)}")
+            raise ConfigError(f"unknown FusionConfig field(s): {', '.join(unknown)}")
         return replace(base or cls.default(),
                        **{k: (Interpolation(v) if k == "interpolation" else float(v)) for k, v in d.items()})
 
@@ -231,19 +233,19 @@ def _stream(name: str, t: np.ndarray | None, *values: tuple[str, np.ndarray | No
             continue
         v = np.asarray(v, dtype=float).reshape(-1)
         if len(v) != len(t):
-            raise ValueError(f"{vname}: {len(v)} values for {len(t)} {name} timestamps")
+            raise OdometryError(f"{vname}: {len(v)} values for {len(t)} {name} timestamps")
         bad = np.flatnonzero(~np.isfinite(v))
         if len(bad):
-            raise ValueError(f"{vname}: non-finite value at sample {bad[0]}")
+            raise OdometryError(f"{vname}: non-finite value at sample {bad[0]}")
         out.append(v)
     if len(t) == 0:
-        raise ValueError(f"{name} timestamps are empty")
+        raise OdometryError(f"{name} timestamps are empty")
     bad = np.flatnonzero(~np.isfinite(t))
     if len(bad):
-        raise ValueError(f"{name} timestamps: non-finite value at sample {bad[0]}")
+        raise OdometryError(f"{name} timestamps: non-finite value at sample {bad[0]}")
     back = np.flatnonzero(np.diff(t) <= 0)
     if len(back):
-        raise ValueError(f"{name} timestamps must increase strictly: sample {back[0] + 1} "
+        raise OdometryError(f"{name} timestamps must increase strictly: sample {back[0] + 1} "
                          f"(t={t[back[0] + 1]!r}) follows t={t[back[0]]!r}")
     return tuple(out)
 
@@ -279,12 +281,11 @@ def _make_ekf(cfg: FusionConfig):
             v, om_w, om_g, alpha, dt = u
             x = self.x
             w = (1.0 - alpha) * om_w / (1.0 + x[4, 0]) + alpha * (om_g - x[3, 0])
-            half = 0.5 * w * dt
-            chord = v / (1.0 + x[5, 0]) * dt * (math.sin(half) / half if abs(half) > 1e-9 else 1.0 - half * half / 6.0)
-            phi = x[2, 0] + half
+            chord, dth = arc_chord(v / (1.0 + x[5, 0]), w, dt)
+            phi = x[2, 0] + 0.5 * dth
             x[0, 0] += chord * math.cos(phi)
             x[1, 0] += chord * math.sin(phi)
-            x[2, 0] = wrap_angle(x[2, 0] + w * dt)
+            x[2, 0] = wrap_angle(x[2, 0] + dth)
 
     ekf = _PlanarEKF(dim_x=_DIM, dim_z=1)
     ekf.x = np.array([[0.0], [0.0], [0.0], [cfg.gyro_bias0], [0.0], [0.0]])
@@ -315,24 +316,24 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
     """
     cfg = config or FusionConfig.default()
     if wheel_t is None or v is None:
-        raise ValueError("wheel odometry speed is required (wheel_t and v): no other input observes translation")
+        raise OdometryError("wheel odometry speed is required (wheel_t and v): no other input observes translation")
     wheel = _stream("wheel", wheel_t, ("wheel v", v), ("wheel omega", omega))
     gyro = None
     if gyro_t is not None or gyro_z is not None:
         if gyro_t is None or gyro_z is None:
-            raise ValueError("gyro_t and gyro_z must be given together")
+            raise OdometryError("gyro_t and gyro_z must be given together")
         gyro = _stream("gyro", gyro_t, ("gyro_z", gyro_z))
     wt, wv, ww = wheel
     if ww is None and gyro is None:
-        raise ValueError("no yaw-rate source: give the wheel omega, the gyro, or both")
+        raise OdometryError("no yaw-rate source: give the wheel omega, the gyro, or both")
     q = np.asarray(query_t, dtype=float).reshape(-1)
     if len(q) == 0:
-        raise ValueError("query_t is empty")
+        raise OdometryError("query_t is empty")
     if not np.all(np.isfinite(q)):
-        raise ValueError(f"query_t: non-finite value at index {int(np.flatnonzero(~np.isfinite(q))[0])}")
+        raise OdometryError(f"query_t: non-finite value at index {int(np.flatnonzero(~np.isfinite(q))[0])}")
     if np.any(np.diff(q) < 0):
         k = int(np.flatnonzero(np.diff(q) < 0)[0])
-        raise ValueError(f"query_t must be non-decreasing: index {k + 1} (t={q[k + 1]!r}) follows t={q[k]!r}")
+        raise OdometryError(f"query_t must be non-decreasing: index {k + 1} (t={q[k + 1]!r}) follows t={q[k]!r}")
 
     # merged timeline over the query span; sensor times a rounding error away from a query time would only make
     # degenerate intervals, so they are dropped
@@ -419,9 +420,8 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
         else:  # no rate sensor: hold the interpolated wheel rate, with a large uncertainty
             al, var_c = 0.0, cfg.gap_rate_sigma ** 2 * cfg.max_gap / dt
         w = (1.0 - al) * wc + al * (om_g[k] - b)
-        half = 0.5 * w * dt
-        chord = vk * dt * (math.sin(half) / half if abs(half) > 1e-9 else 1.0)
-        phi_h = th + half
+        chord, dth = arc_chord(vk, w, dt)
+        phi_h = th + 0.5 * dth
         cph, sph = math.cos(phi_h), math.sin(phi_h)
         # Jacobian: heading swings the chord; b and s turn the heading (and half of the chord)
         dw_db, dw_ds = -al, -(1.0 - al) * wc * inv1s

@@ -2,7 +2,7 @@
 
 Convention: `fit` finds (dx, dy, dtheta) such that dst ≈ R(dtheta) src + (dx, dy). For a downward camera, with
 src the floor points of frame k (base frame k) and dst the same floor points in base frame k-1, this motion is
-the robot's motion from k-1 to k in the compose convention of `odometry.poses`:
+the robot's motion from k-1 to k in the compose convention of `odometry.shared.poses`:
 pose_k = compose(pose_{k-1}, (dx, dy, dtheta)).
 """
 from __future__ import annotations

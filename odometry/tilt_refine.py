@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from odometry.camera import CameraModel
+from odometry.shared.camera import CameraModel
 
 _EPS = 1e-6  # finite-difference step for the tilt and height derivatives (rad, relative)
 

@@ -14,8 +14,10 @@ import math
 import cv2
 import numpy as np
 
+from odometry.errors import OdometryError
 
-class BadImage(ValueError):
+
+class BadImage(OdometryError):
     """A frame that cannot be used (missing, wrong size or type, non-finite, constant)."""
 
 

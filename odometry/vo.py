@@ -15,7 +15,7 @@ Per frame:
    on a usable frame.
 
 Direction convention: floor points of the current frame (its base frame) are mapped onto the keyframe's floor
-points; that rigid transform is the pose of the current frame in the keyframe's frame (`odometry.poses.compose`).
+points; that rigid transform is the pose of the current frame in the keyframe's frame (`odometry.shared.poses.compose`).
 """
 from __future__ import annotations
 
@@ -27,13 +27,24 @@ from typing import Callable
 
 import numpy as np
 
-from odometry.camera import CameraModel
-from odometry.pose_cov import between_with_covariance, compose_with_covariance
-from odometry.poses import compose
+from odometry.errors import OdometryError
 from odometry.rigid import RigidFit, ransac_rigid_2d
+from odometry.shared.camera import CameraModel
+from odometry.shared.errors import ConfigError
+from odometry.shared.pose_covariance import between_with_covariance, compose_with_covariance
+from odometry.shared.poses import compose
 from odometry.tilt_refine import refine_planar_tilt
-from odometry.tracking import (BadImage, coarse_shift, contrast, detect_corners, highpass, normalize, normalize_local,
-                               to_gray, track_lk)
+from odometry.tracking import (
+    BadImage,
+    coarse_shift,
+    contrast,
+    detect_corners,
+    highpass,
+    normalize,
+    normalize_local,
+    to_gray,
+    track_lk,
+)
 
 __all__ = ["Photometric", "Reference", "VOConfig", "VOEstimate", "VOStatus", "VOTrajectory", "VisualOdometry",
            "run_visual_odometry"]
@@ -130,13 +141,13 @@ class VOConfig:
             if isinstance(v, (bool, Enum)) or f.name == "grid":
                 continue
             if not math.isfinite(v) or v < 0:
-                raise ValueError(f"VOConfig.{f.name} must be a finite number >= 0, got {v!r}")
+                raise ConfigError(f"VOConfig.{f.name} must be a finite number >= 0, got {v!r}")
         if len(self.grid) != 2 or min(self.grid) < 1:
-            raise ValueError(f"VOConfig.grid must be two positive integers, got {self.grid!r}")
+            raise ConfigError(f"VOConfig.grid must be two positive integers, got {self.grid!r}")
         if self.lk_window < 5 or self.lk_window % 2 == 0:
-            raise ValueError(f"VOConfig.lk_window must be an odd number >= 5, got {self.lk_window}")
+            raise ConfigError(f"VOConfig.lk_window must be an odd number >= 5, got {self.lk_window}")
         if self.min_inliers < 3:
-            raise ValueError(f"VOConfig.min_inliers must be >= 3, got {self.min_inliers}")
+            raise ConfigError(f"VOConfig.min_inliers must be >= 3, got {self.min_inliers}")
 
     @classmethod
     def default(cls) -> "VOConfig":
@@ -152,7 +163,7 @@ class VOConfig:
     def preset(cls, name: str) -> "VOConfig":
         presets = {"default": cls.default, "fast": cls.fast}
         if name not in presets:
-            raise ValueError(f"unknown VO preset {name!r}; choose one of {', '.join(presets)}")
+            raise ConfigError(f"unknown VO preset {name!r}; choose one of {', '.join(presets)}")
         return presets[name]()
 
     @classmethod
@@ -160,7 +171,7 @@ class VOConfig:
         names = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - names)
         if unknown:
-            raise ValueError(f"unknown VOConfig field(s): {', '.join(unknown)}")
+            raise ConfigError(f"unknown VOConfig field(s): {', '.join(unknown)}")
         d = {k: tuple(v) if k == "grid" else v for k, v in d.items()}
         return replace(base or cls.default(), **d)
 
@@ -248,7 +259,7 @@ class VisualOdometry:
 
     def __init__(self, camera: CameraModel, config: VOConfig | None = None) -> None:
         if not camera.is_downward:
-            raise ValueError("VisualOdometry needs a downward camera (camera_height in camera.yaml)")
+            raise OdometryError("VisualOdometry needs a downward camera (camera_height in camera.yaml)")
         self.camera = camera
         self.config = config or VOConfig.default()
         self._rng = np.random.default_rng(self.config.seed)
@@ -286,7 +297,7 @@ class VisualOdometry:
         index = len(self._poses)
         self._fit_seconds = 0.0
         if self._last_t is not None and not timestamp > self._last_t:
-            raise ValueError(f"frame {index}: timestamp {timestamp!r} does not increase (previous {self._last_t!r})")
+            raise OdometryError(f"frame {index}: timestamp {timestamp!r} does not increase (previous {self._last_t!r})")
         dt = None if self._last_t is None else timestamp - self._last_t
         if fallback is not None:
             fb_delta = np.asarray(fallback[0], dtype=float).reshape(3)

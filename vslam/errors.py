@@ -1,13 +1,20 @@
-"""Typed errors for bad input. All derive from ValueError so the CLI reports them on one line.
+"""The root of the errors `vslam` raises on bad input, and the typed errors of sequence reading.
 
-Each names the file and, where it applies, the line (1-based) and the field.
+Every one derives from `VslamError` (itself an `odometry.shared.errors.ToolkitError`, so a `ValueError`) and
+names the file and, where it applies, the line (1-based) and the field; the CLI reports them on one line.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
+from odometry.shared.errors import ToolkitError
 
-class SequenceError(ValueError):
+
+class VslamError(ToolkitError):
+    """Bad input to the composition layer: a sequence, a run directory, a command's arguments."""
+
+
+class SequenceError(VslamError):
     """A sequence that cannot be read as given."""
 
     def __init__(self, path: str | Path, problem: str, line: int | None = None, field: str | None = None):

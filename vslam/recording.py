@@ -16,7 +16,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from odometry.poses import transform_points
+from odometry.shared.poses import transform_points
+from odometry.shared.rotations import yaw_to_quat
 
 GREEN, RED, GREY = (40, 190, 60), (220, 40, 40), (160, 160, 160)
 COLOURS = {"vo": (255, 140, 0), "slam": (30, 120, 230), "gt": (90, 90, 90)}
@@ -118,7 +119,7 @@ class RunRecorder:
         if len(seg) >= _CHUNK:
             self._flush_segment(which)
         if which == "slam" or not self._seg["slam"]:
-            q = [0.0, 0.0, float(np.sin(pose[2] / 2)), float(np.cos(pose[2] / 2))]
+            q = [float(v) for v in yaw_to_quat(pose[2])]
             self.rec.log("/world/robot", rr.Transform3D(translation=[float(pose[0]), float(pose[1]), 0.0], quaternion=q))
             if self.camera is not None and self.camera.camera_height is not None:
                 fp = transform_points(pose, self.camera.footprint())

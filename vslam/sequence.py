@@ -13,9 +13,10 @@ from typing import Iterator, Protocol
 import cv2
 import numpy as np
 
-from odometry.camera import CameraModel
-from odometry.poses import tum_to_se2, wrap_angle
-from vslam.errors import ImageReadError
+from odometry.shared.camera import CameraModel
+from odometry.shared.poses import wrap_angle
+from odometry.shared.tum import tum_to_se2
+from vslam.errors import ImageReadError, VslamError
 
 
 @dataclass(frozen=True)
@@ -204,5 +205,5 @@ class Sequence:
 
     def require_camera(self) -> CameraModel:
         if self.camera is None:
-            raise ValueError(f"sequence {self.root or self.name} has no calibration: give one with --camera camera.yaml")
+            raise VslamError(f"sequence {self.root or self.name} has no calibration: give one with --camera camera.yaml")
         return self.camera

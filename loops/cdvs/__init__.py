@@ -8,8 +8,15 @@
     db = LoopDatabase(4, CdvsParams.floor(4), model=LoopModel.default())
     cands = db.query(d, frame_id); db.add(frame_id, d)
 """
-from loops.cdvs.codec import (Descriptor, DescriptorDecodeError, decode, encode, encode_all_modes, encode_features,
-                              extract)
+from loops.cdvs.codec import (
+                              Descriptor,
+                              DescriptorDecodeError,
+                              decode,
+                              encode,
+                              encode_all_modes,
+                              encode_features,
+                              extract,
+)
 from loops.cdvs.database import Candidate, DatabaseParams, LoopDatabase
 from loops.cdvs.extract import Features, extract_features
 from loops.cdvs.match import IncompatibleDescriptorsError, MatchResult, match

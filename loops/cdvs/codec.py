@@ -28,6 +28,7 @@ from loops.cdvs.extract import Features, extract_features
 from loops.cdvs.global_desc import cluster_signatures, select_clusters
 from loops.cdvs.params import BUDGETS, MODES, CdvsParams
 from loops.cdvs.trained import GLOBAL_BITS, N_BITS, TrainedParams, load_trained
+from loops.errors import LoopsError
 
 MAGIC = b"CD"
 VERSION = 1
@@ -37,7 +38,7 @@ CRC_SIZE = 4
 MAX_RICE_K = 24
 
 
-class DescriptorDecodeError(ValueError):
+class DescriptorDecodeError(LoopsError):
     """A byte string is not a valid compact descriptor (truncated, corrupt, foreign or unsupported)."""
 
 

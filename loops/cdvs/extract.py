@@ -14,6 +14,7 @@ import numpy as np
 
 from loops.cdvs.params import ExtractionParams
 from loops.cdvs.trained import TrainedParams
+from loops.errors import LoopsError
 
 
 @dataclass(frozen=True)
@@ -34,18 +35,18 @@ def to_gray_u8(image: np.ndarray) -> np.ndarray:
         im = im[:, :, 0]
     if im.ndim == 3:
         if im.shape[2] not in (3, 4):
-            raise ValueError(f"image must be gray or BGR(A), got shape {im.shape}")
+            raise LoopsError(f"image must be gray or BGR(A), got shape {im.shape}")
         im = cv2.cvtColor(im, cv2.COLOR_BGR2GRAY if im.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
     if im.ndim != 2:
-        raise ValueError(f"image must be a 2-D gray or 3-D colour array, got shape {im.shape}")
+        raise LoopsError(f"image must be a 2-D gray or 3-D colour array, got shape {im.shape}")
     if im.shape[0] < 16 or im.shape[1] < 16 or max(im.shape) > 65535:
-        raise ValueError(f"image size {im.shape[1]}x{im.shape[0]} is outside 16..65535 pixels")
+        raise LoopsError(f"image size {im.shape[1]}x{im.shape[0]} is outside 16..65535 pixels")
     if im.dtype == np.uint16:
         im = (im >> 8).astype(np.uint8)
     elif im.dtype.kind == "f":
         im = np.clip(im * 255.0 + 0.5, 0, 255).astype(np.uint8)
     elif im.dtype != np.uint8:
-        raise ValueError(f"unsupported image dtype {im.dtype}")
+        raise LoopsError(f"unsupported image dtype {im.dtype}")
     return np.ascontiguousarray(im)
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from odometry.camera import CameraModel
-from odometry.footprint import DEFAULT_OVERLAP_THRESHOLD, overlap_pairs
+from odometry.shared.camera import CameraModel
+from odometry.shared.footprint import DEFAULT_OVERLAP_THRESHOLD, overlap_pairs
 
 
 def pair_overlaps(camera: CameraModel, poses: np.ndarray, pairs: np.ndarray) -> np.ndarray:

@@ -18,8 +18,8 @@ from loops.cdvs.match import match
 from loops.cdvs.model import LoopModel, fit_curve
 from loops.cdvs.params import MODES, CdvsParams
 from loops.cdvs.trained import TrainedParams, load_trained
-from odometry.camera import CameraModel
-from odometry.footprint import overlap_matrix
+from odometry.shared.camera import CameraModel
+from odometry.shared.footprint import overlap_matrix
 
 
 @dataclass
@@ -34,7 +34,7 @@ class PairScores:
     usable: np.ndarray | None = None           # (P,) pairs whose label the poses can be trusted for
 
     def save(self, path) -> None:
-        from odometry.atomic_io import atomic_path
+        from odometry.shared.atomic_io import atomic_path
 
         arrays = {"pairs": self.pairs, "overlap": self.overlap}
         arrays.update({f"local_{m}": v for m, v in self.local.items()})

@@ -11,9 +11,10 @@ from loops.cdvs.geometry import distrat_inliers, ransac, transform_overlap
 from loops.cdvs.global_desc import global_score
 from loops.cdvs.params import MatchParams
 from loops.cdvs.trained import TrainedParams, load_trained
+from loops.errors import LoopsError
 
 
-class IncompatibleDescriptorsError(ValueError):
+class IncompatibleDescriptorsError(LoopsError):
     """The two descriptors were made with different trained parameters and cannot be compared."""
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from loops.cdvs.trained import DATA_DIR
+from loops.errors import LoopsError
 
 DEFAULT_MODEL = DATA_DIR / "loop_model.json"
 FORMAT = "vslam-loop-model"
@@ -112,7 +113,7 @@ class LoopModel:
                           for m, c in sorted(self.curves.items())}}
 
     def save(self, path: str | Path) -> None:
-        from odometry.atomic_io import atomic_write_text
+        from odometry.shared.atomic_io import atomic_write_text
 
         atomic_write_text(path, json.dumps(self.to_dict(), indent=1) + "\n")
 
@@ -122,15 +123,15 @@ class LoopModel:
         try:
             d = json.loads(p.read_text())
         except json.JSONDecodeError as exc:
-            raise ValueError(f"{p}: not a loop model (invalid JSON at line {exc.lineno}: {exc.msg})") from None
+            raise LoopsError(f"{p}: not a loop model (invalid JSON at line {exc.lineno}: {exc.msg})") from None
         return cls.from_dict(d, str(p))
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "loop model") -> "LoopModel":
         if not isinstance(d, dict) or d.get("format") != FORMAT:
-            raise ValueError(f"{source}: not a loop model (field 'format' must be {FORMAT!r})")
+            raise LoopsError(f"{source}: not a loop model (field 'format' must be {FORMAT!r})")
         if d.get("version") != VERSION:
-            raise ValueError(f"{source}: unsupported loop model version {d.get('version')!r}")
+            raise LoopsError(f"{source}: unsupported loop model version {d.get('version')!r}")
         curves = {}
         for key, c in (d.get("modes") or {}).items():
             try:
@@ -141,13 +142,13 @@ class LoopModel:
                 tot = np.asarray(c.get("totals", np.zeros(len(prob))), float)
                 thr = math.inf if c["threshold"] is None else float(c["threshold"])
             except (KeyError, TypeError, ValueError) as exc:
-                raise ValueError(f"{source}: mode {key}: bad or missing field ({exc})") from None
+                raise LoopsError(f"{source}: mode {key}: bad or missing field ({exc})") from None
             if len(edges) != len(prob) or np.any(np.diff(edges) <= 0) or np.any((prob < 0) | (prob > 1)):
-                raise ValueError(f"{source}: mode {key}: edges must increase and match the probabilities in [0, 1]")
+                raise LoopsError(f"{source}: mode {key}: edges must increase and match the probabilities in [0, 1]")
             curves[m] = ModeCurve(m, edges, prob, pos, tot, thr)
         mo = d.get("min_overlap")
         if mo is not None and not (isinstance(mo, (int, float)) and 0.0 <= mo <= 1.0):
-            raise ValueError(f"{source}: field 'min_overlap' must be null or a number in [0, 1], got {mo!r}")
+            raise LoopsError(f"{source}: field 'min_overlap' must be null or a number in [0, 1], got {mo!r}")
         return cls(float(d.get("overlap_threshold", 0.33)), curves, d.get("provenance", {}),
                    None if mo is None else float(mo))
 

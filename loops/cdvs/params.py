@@ -8,6 +8,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, replace
 
+from odometry.shared.errors import ConfigError
+
 MODES = (1, 2, 3, 4, 5, 6)
 BUDGETS = {1: 512, 2: 1024, 3: 2048, 4: 4096, 5: 8192, 6: 16384}
 
@@ -76,7 +78,7 @@ class CdvsParams:
     @staticmethod
     def for_mode(mode: int, **overrides) -> "CdvsParams":
         if mode not in MODE_PRESETS:
-            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+            raise ConfigError(f"mode must be one of {MODES}, got {mode!r}")
         p = CdvsParams(mode=MODE_PRESETS[mode])
         return replace(p, **overrides) if overrides else p
 

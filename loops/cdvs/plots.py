@@ -16,7 +16,7 @@ def _plt():
 
 
 def plot_loop_model(model, path: str | Path) -> None:
-    from odometry.atomic_io import atomic_path
+    from odometry.shared.atomic_io import atomic_path
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=90)
@@ -45,7 +45,7 @@ def plot_loop_model(model, path: str | Path) -> None:
 
 def plot_score_matrices(matrices: dict[str, np.ndarray], path: str | Path, title: str = "") -> None:
     """Lower-triangular score matrices (row i = query, column j < i) side by side, each normalised."""
-    from odometry.atomic_io import atomic_path
+    from odometry.shared.atomic_io import atomic_path
 
     plt = _plt()
     n = len(matrices)

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from loops.errors import LoopsError
+
 DATA_DIR = Path(__file__).resolve().parents[1] / "data"
 DEFAULT_TRAINED = DATA_DIR / "cdvs_trained.npz"
 N_BITS = 256          # ORB descriptor length
@@ -58,7 +60,7 @@ def compute_params_id(arrays: dict) -> int:
 
 
 def save_trained(path: str | Path, arrays: dict, provenance: dict) -> None:
-    from odometry.atomic_io import atomic_path
+    from odometry.shared.atomic_io import atomic_path
 
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
@@ -80,15 +82,15 @@ def _load_cached(path: str) -> TrainedParams:
             arrays = {k: np.array(z[k]) for k in ARRAY_FIELDS}
             provenance = json.loads(str(z["provenance"]))
     except (KeyError, ValueError, OSError, zlib.error) as exc:
-        raise ValueError(f"{p}: not a valid trained descriptor parameter file ({exc})") from exc
+        raise LoopsError(f"{p}: not a valid trained descriptor parameter file ({exc})") from exc
     arrays["codebook"] = arrays["codebook"].astype(np.uint8)
     arrays["bit_order"] = arrays["bit_order"].astype(np.int64)
     for k in ("cluster_mean", "projection", "global_weights"):
         arrays[k] = arrays[k].astype(np.float32)
     if sorted(arrays["bit_order"].tolist()) != list(range(N_BITS)):
-        raise ValueError(f"{p}: bit_order is not a permutation of 0..{N_BITS - 1}")
+        raise LoopsError(f"{p}: bit_order is not a permutation of 0..{N_BITS - 1}")
     if arrays["projection"].shape != (N_BITS, GLOBAL_BITS) or arrays["codebook"].shape[1] != N_BITS // 8:
-        raise ValueError(f"{p}: codebook/projection shapes do not match a {N_BITS}-bit descriptor")
+        raise LoopsError(f"{p}: codebook/projection shapes do not match a {N_BITS}-bit descriptor")
     for a in arrays.values():
         a.setflags(write=False)
     return TrainedParams(**arrays, provenance=provenance, params_id=compute_params_id(arrays))

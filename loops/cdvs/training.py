@@ -1,6 +1,7 @@
 """Offline training of the small parameter file `loops/data/cdvs_trained.npz`.
 
-    python -m loops.cdvs.training [--out loops/data/cdvs_trained.npz] [--seed 0] [--floors DIR ...]
+    python -m loops.cdvs.training --shared ../shared/data [--out loops/data/cdvs_trained.npz] [--seed 0]
+        [--floors DIR ...]
 
 Training images: the real ground textures and the KITTI snippet of an unidentified sequence 00-02 drive in
 ../shared/data (never the 48 evaluation pairs, nor the KITTI 06 snippet whose frames appear in them), optionally
@@ -164,11 +165,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=str(DEFAULT_TRAINED))
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--floors", nargs="*", default=[], help="simulated sequence directories to add")
-    ap.add_argument("--shared", default=None, help="shared data folder (default: vslam's ../shared/data)")
+    ap.add_argument("--shared", required=True, help="the shared data folder (../shared/data beside the checkout)")
     args = ap.parse_args(argv)
-    from vslam.paths import shared_data_dir  # training is a developer tool; the library itself never needs vslam
-
-    shared = Path(args.shared) if args.shared else shared_data_dir(required=True)
+    shared = Path(args.shared)
     rng = np.random.default_rng(args.seed)
     ex = ExtractionParams()
     t0 = time.time()

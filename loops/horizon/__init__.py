@@ -13,8 +13,15 @@ the line x_test = b_s * x_stored + b_d that tells how the robot turned (b_d) and
     result = match(test, stored, params)          # .score, .score_ransac, .b_s, .b_d, .inliers
 """
 from loops.horizon.matching import MatchResult, fit_line_ransac, match, nn_matches
-from loops.horizon.memory import (MEMORY_VERSION, Landmark, LandmarkMemory, MemoryFormatError, Recognition,
-                                  load_memory, save_memory)
+from loops.horizon.memory import (
+                                  MEMORY_VERSION,
+                                  Landmark,
+                                  LandmarkMemory,
+                                  MemoryFormatError,
+                                  Recognition,
+                                  load_memory,
+                                  save_memory,
+)
 from loops.horizon.params import PRESETS, HorizonParams, SampleMode
 from loops.horizon.roc import auc, roc_curve, tpr_at_fpr
 from loops.horizon.signal import HorizonError, HorizonLine, horizon_signal, sample_columns

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from loops.errors import LoopsError
 from loops.horizon.matching import MatchResult, match
 from loops.horizon.params import HorizonParams
 from loops.horizon.signal import HorizonLine
@@ -23,7 +24,7 @@ MEMORY_VERSION = 1
 _FORMAT = "vslam.horizon.memory"
 
 
-class MemoryFormatError(ValueError):
+class MemoryFormatError(LoopsError):
     """A landmark memory file that cannot be read; the message names the file and the problem."""
 
 
@@ -71,10 +72,10 @@ class LandmarkMemory:
             horizon: HorizonLine | float | None = None) -> Landmark:
         """Memorise `features` under `name` (names are unique)."""
         if name in self.names:
-            raise ValueError(f"landmark {name!r} is already in the memory")
+            raise LoopsError(f"landmark {name!r} is already in the memory")
         dim = 2 * self.params.subregions
         if features.descriptor.ndim != 2 or features.descriptor.shape[1] != dim:
-            raise ValueError(f"landmark {name!r}: descriptors of size {features.descriptor.shape[1:]} do not match "
+            raise LoopsError(f"landmark {name!r}: descriptors of size {features.descriptor.shape[1:]} do not match "
                              f"the memory's parameters (size {dim})")
         if horizon is None:
             horizon = HorizonLine(float("nan"), float("nan"))
@@ -117,7 +118,7 @@ _RUNTIME_DTYPES = {"x": np.float64, "scale": np.float64, "level": np.intp, "sign
 
 def save_memory(memory: LandmarkMemory, path: str | os.PathLike) -> None:
     """Write `memory` to `path` (.npz) atomically."""
-    from odometry.atomic_io import atomic_path
+    from odometry.shared.atomic_io import atomic_path
 
     lms = memory.landmarks
     dim = 2 * memory.params.subregions

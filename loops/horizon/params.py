@@ -12,6 +12,8 @@ import dataclasses
 import enum
 from dataclasses import dataclass
 
+from odometry.shared.errors import ConfigError
+
 
 class SampleMode(str, enum.Enum):
     """How the band is reduced to one value every `step` columns."""
@@ -61,23 +63,23 @@ class HorizonParams:
         for name in positive_ints:
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
-                raise ValueError(f"HorizonParams.{name} must be a positive integer, got {v!r}")
+                raise ConfigError(f"HorizonParams.{name} must be a positive integer, got {v!r}")
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
-            raise ValueError(f"HorizonParams.seed must be a non-negative integer, got {self.seed!r}")
+            raise ConfigError(f"HorizonParams.seed must be a non-negative integer, got {self.seed!r}")
         if not self.scale_tolerance >= 0:
-            raise ValueError(f"HorizonParams.scale_tolerance must be >= 0, got {self.scale_tolerance!r}")
+            raise ConfigError(f"HorizonParams.scale_tolerance must be >= 0, got {self.scale_tolerance!r}")
         for name in ("descriptor_window", "gaussian_sigma", "min_distance", "ransac_tolerance"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"HorizonParams.{name} must be > 0, got {getattr(self, name)!r}")
+                raise ConfigError(f"HorizonParams.{name} must be > 0, got {getattr(self, name)!r}")
         object.__setattr__(self, "sample_mode", SampleMode(self.sample_mode))
         if not self.threshold >= 0:
-            raise ValueError(f"HorizonParams.threshold must be >= 0, got {self.threshold!r}")
+            raise ConfigError(f"HorizonParams.threshold must be >= 0, got {self.threshold!r}")
         if not 0 < self.ratio <= 1:
-            raise ValueError(f"HorizonParams.ratio must be in (0, 1], got {self.ratio!r}")
+            raise ConfigError(f"HorizonParams.ratio must be in (0, 1], got {self.ratio!r}")
         if not self.max_scale_change >= 1:
-            raise ValueError(f"HorizonParams.max_scale_change must be >= 1, got {self.max_scale_change!r}")
+            raise ConfigError(f"HorizonParams.max_scale_change must be >= 1, got {self.max_scale_change!r}")
         if self.ransac_min_inliers < 2:
-            raise ValueError(f"HorizonParams.ransac_min_inliers must be >= 2, got {self.ransac_min_inliers!r}")
+            raise ConfigError(f"HorizonParams.ransac_min_inliers must be >= 2, got {self.ransac_min_inliers!r}")
 
     def replace(self, **changes) -> "HorizonParams":
         return dataclasses.replace(self, **changes)
@@ -92,7 +94,7 @@ class HorizonParams:
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
-            raise ValueError(f"unknown HorizonParams field(s): {', '.join(unknown)}")
+            raise ConfigError(f"unknown HorizonParams field(s): {', '.join(unknown)}")
         return cls(**d)
 
     @classmethod
@@ -100,7 +102,7 @@ class HorizonParams:
         try:
             return PRESETS[name]
         except KeyError:
-            raise ValueError(f"unknown horizon preset {name!r}; choose from {', '.join(PRESETS)}") from None
+            raise ConfigError(f"unknown horizon preset {name!r}; choose from {', '.join(PRESETS)}") from None
 
 
 PRESETS: dict[str, HorizonParams] = {

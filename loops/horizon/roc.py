@@ -3,16 +3,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from loops.errors import LoopsError
+
 
 def _check(scores: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     s = np.asarray(scores, dtype=np.float64).ravel()
     y = np.asarray(labels).ravel().astype(bool)
     if s.shape != y.shape:
-        raise ValueError(f"scores ({s.size}) and labels ({y.size}) differ in length")
+        raise LoopsError(f"scores ({s.size}) and labels ({y.size}) differ in length")
     if not np.all(np.isfinite(s)):
-        raise ValueError("scores must be finite")
+        raise LoopsError("scores must be finite")
     if y.all() or not y.any():
-        raise ValueError("an ROC needs both matched (label 1) and unmatched (label 0) pairs")
+        raise LoopsError("an ROC needs both matched (label 1) and unmatched (label 0) pairs")
     return s, y
 
 

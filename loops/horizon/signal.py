@@ -9,10 +9,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from loops.errors import LoopsError
 from loops.horizon.params import HorizonParams, SampleMode
 
 
-class HorizonError(ValueError):
+class HorizonError(LoopsError):
     """A horizon that cannot be read from an image (outside it, or too short a signal)."""
 
 

@@ -13,10 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from loops.errors import LoopsError
+
 from .params import Distance
 
 
-class EmptyMemoryError(ValueError):
+class EmptyMemoryError(LoopsError):
     """A visual memory without key images (or without any descriptor) cannot localise anything."""
 
 

@@ -7,15 +7,17 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
+from loops.errors import LoopsError
+
 from .brief import brief_describe, brief_pattern, inside, pattern_radius, rotated_offsets, smooth_for_brief
 from .params import DescriptorName, VocabParams
 
 
-class NoFeaturesError(ValueError):
+class NoFeaturesError(LoopsError):
     """An image gave no descriptor at all (blank, too small, or fully masked)."""
 
 
-class GrayscaleImageError(ValueError):
+class GrayscaleImageError(LoopsError):
     """A colour vocabulary was given a grayscale image."""
 
 
@@ -32,9 +34,9 @@ def prepare(image: np.ndarray, params: VocabParams, mask: np.ndarray | None = No
     """Upscale images whose shorter side is below params.min_image_side (the mask follows). Colour descriptors are
     left alone: their patches are defined relative to the image size, so upscaling would only cost time."""
     if image is None or image.size == 0:
-        raise ValueError("empty image")
+        raise LoopsError("empty image")
     if image.dtype != np.uint8:
-        raise ValueError(f"images must be 8-bit, got {image.dtype}")
+        raise LoopsError(f"images must be 8-bit, got {image.dtype}")
     side = min(image.shape[:2])
     if params.min_image_side and side < params.min_image_side and not params.descriptor.is_color:
         f = params.min_image_side / side

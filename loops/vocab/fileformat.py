@@ -20,14 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
-from odometry.atomic_io import atomic_write_bytes
+from loops.errors import LoopsError
+from odometry.shared.atomic_io import atomic_write_bytes
 
 MAGIC = b"VSLMVOC\0"
 VERSION = 1
 _ALIGN = 64
 
 
-class VocabFileError(ValueError):
+class VocabFileError(LoopsError):
     """A vocabulary / memory file that is not ours, is truncated, or is corrupted."""
 
 

@@ -9,7 +9,6 @@ import enum
 
 import numpy as np
 
-
 _BYTE_HIST_BINS = 1 << 20   # largest (cluster, byte, value) histogram cluster_sums builds instead of unpacking bits
 _BYTE_BITS = np.unpackbits(np.arange(256, dtype=np.uint8)[:, None], axis=1).astype(np.float64)  # (256, 8), MSB first
 _BYTE_BITS.setflags(write=False)

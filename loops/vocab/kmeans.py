@@ -10,8 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kinds import (DescriptorKind, batched_distances, centres, centres_from_sums, cluster_sums, distances,
-                    paired_distances, unpacked_bits)
+from .kinds import (
+    DescriptorKind,
+    batched_distances,
+    centres,
+    centres_from_sums,
+    cluster_sums,
+    distances,
+    paired_distances,
+    unpacked_bits,
+)
 
 _CHUNK_BYTES = 1 << 24  # gathered centres per assignment chunk (16 MB)
 _SUMS_BYTES = 1 << 26   # cluster sums kept for incremental centre updates (64 MB)

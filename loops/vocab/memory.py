@@ -15,7 +15,7 @@ import numpy as np
 
 from .database import BowDatabase, EmptyMemoryError
 from .features import brief_angles, extract
-from .fileformat import load_arrays, save_arrays
+from .fileformat import VocabFileError, load_arrays, save_arrays
 from .params import VocabParams
 from .tree import VocabularyTree, build_tree
 
@@ -163,7 +163,7 @@ class VisualMemory:
     def load(cls, path: str | Path) -> "VisualMemory":
         meta, arrays = load_arrays(path)
         if meta.get("kind") != FILE_KIND:
-            raise ValueError(f"{path}: not a visual memory file (kind {meta.get('kind')!r})")
+            raise VocabFileError(f"{path}: not a visual memory file (kind {meta.get('kind')!r})")
         params = VocabParams.from_dict(meta["params"])
         trees, dbs = [], []
         for o, tm in enumerate(meta["trees"]):

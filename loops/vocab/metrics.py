@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from loops.errors import LoopsError
+
 
 def full_ranks(ranked_keys: np.ndarray, n_keys: int) -> np.ndarray:
     """1-based rank of every key image given the ranked candidate list (unranked keys share the tail's mean)."""
@@ -33,7 +35,7 @@ def mu2(ranked_keys: np.ndarray, key_similarity: np.ndarray, n_keys: int) -> flo
     z = np.asarray(key_similarity, float)
     total = z.sum()
     if total <= 0:
-        raise ValueError("mu2 needs a true key image with non-zero self-similarity")
+        raise LoopsError("mu2 needs a true key image with non-zero self-similarity")
     return float((z / total) @ full_ranks(ranked_keys, n_keys))
 
 
@@ -74,7 +76,7 @@ def repeatability(top1: np.ndarray) -> float:
     of builds giving its most frequent answer; averaged over queries (1.0 = every build agrees)."""
     top1 = np.asarray(top1)
     if top1.ndim != 2 or top1.shape[0] == 0:
-        raise ValueError("repeatability needs a (builds, queries) array")
+        raise LoopsError("repeatability needs a (builds, queries) array")
     shares = []
     for q in range(top1.shape[1]):
         _, counts = np.unique(top1[:, q], return_counts=True)

@@ -10,6 +10,8 @@ import dataclasses
 import enum
 from dataclasses import dataclass
 
+from odometry.shared.errors import ConfigError
+
 
 class DescriptorName(str, enum.Enum):
     """The seven vocabularies of the paper (CLI names)."""
@@ -100,7 +102,7 @@ class VocabParams:
                   (self.max_train_descriptors >= self.k, "max_train_descriptors must be >= k")]
         for ok, msg in checks:
             if not ok:
-                raise ValueError(f"VocabParams: {msg}")
+                raise ConfigError(f"VocabParams: {msg}")
 
     def replace(self, **changes) -> "VocabParams":
         return dataclasses.replace(self, **changes)
@@ -116,7 +118,7 @@ class VocabParams:
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(d) - known
         if unknown:
-            raise ValueError(f"VocabParams: unknown field(s) {sorted(unknown)}")
+            raise ConfigError(f"VocabParams: unknown field(s) {sorted(unknown)}")
         return cls(**d)
 
 
@@ -133,5 +135,5 @@ PRESETS: dict[str, VocabParams] = {
 def preset(name: str, **overrides) -> VocabParams:
     """A named preset with some fields overridden, e.g. preset("paper", descriptor="orb")."""
     if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r} (choose from {', '.join(PRESETS)})")
+        raise ConfigError(f"unknown preset {name!r} (choose from {', '.join(PRESETS)})")
     return PRESETS[name].replace(**overrides)

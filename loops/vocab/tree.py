@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .fileformat import VocabFileError
 from .kinds import DescriptorKind, as_storage, batched_distances, kind_of
 from .kmeans import grouped_kmeans
 
@@ -73,9 +74,9 @@ class VocabularyTree:
         word = arrays[f"{prefix}word"]
         centres = arrays[f"{prefix}centres"]
         if not (len(children) == len(word) == len(centres)) or children.shape[1] != meta["k"]:
-            raise ValueError("vocabulary arrays have inconsistent shapes")
+            raise VocabFileError("vocabulary arrays have inconsistent shapes")
         if children.max(initial=-1) >= len(children) or (word >= 0).sum() != word.max(initial=-1) + 1:
-            raise ValueError("vocabulary arrays are inconsistent (child or word ids out of range)")
+            raise VocabFileError("vocabulary arrays are inconsistent (child or word ids out of range)")
         return cls(DescriptorKind(meta["kind"]), int(meta["k"]), int(meta["depth"]), centres, children, word)
 
 
@@ -155,5 +156,5 @@ def load_vocabulary(path) -> tuple[VocabularyTree, dict]:
 
     meta, arrays = load_arrays(path)
     if meta.get("kind") != VOCAB_FILE_KIND:
-        raise ValueError(f"{path}: not a vocabulary file (kind {meta.get('kind')!r})")
+        raise VocabFileError(f"{path}: not a vocabulary file (kind {meta.get('kind')!r})")
     return VocabularyTree.from_arrays(meta["tree"], arrays), meta.get("info", {})

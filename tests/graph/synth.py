@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from graph import PoseGraphData
-from odometry.poses import between, compose, integrate
+from odometry.shared.poses import between, compose, integrate
 
 
 def square_laps(laps: int = 2, side: int = 5, step: float = 1.0) -> np.ndarray:

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from graph import GraphParams, PoseGraph, inject_false_loops, loop_scores, optimize
-from odometry.poses import between
+from odometry.shared.poses import between
 from tests.graph.synth import ate, noisy_graph, square_laps
 
 COV = np.diag([0.01 ** 2, 0.01 ** 2, 0.005 ** 2])
@@ -168,7 +168,7 @@ def test_odometry_guess_composes_reversed_edges():
     rev = data.copy()
     odo = ~rev.is_loop
     rev.edge_from[odo], rev.edge_to[odo] = data.edge_to[odo].copy(), data.edge_from[odo].copy()
-    from odometry.poses import inverse
+    from odometry.shared.poses import inverse
 
     rev.measurements[odo] = inverse(data.measurements[odo])
     rev.poses[:] = np.nan

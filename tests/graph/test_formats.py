@@ -81,8 +81,9 @@ def test_toro_information_order_differs_from_g2o(tmp_path):
 
 
 def test_toro_round_trip_of_a_real_file_is_byte_identical(tmp_path):
-    import gtsam
     from pathlib import Path
+
+    import gtsam
 
     src = Path(gtsam.__file__).parent / "Data" / "w100.graph"
     if not src.exists():

@@ -37,8 +37,9 @@ def test_csail_half_false_loops(csail):
 def test_sphere2500_gated_solve_falls_back_when_the_gate_start_is_bad():
     # sphere2500 (3D, in the gtsam wheel) with 10 % false loops: GNC started from the gate's estimate rejects every
     # loop, and the chordal re-initialisation is indeterminate for some loop subsets; the ungated solve is right
-    import gtsam
     from pathlib import Path
+
+    import gtsam
 
     path = Path(gtsam.__file__).parent / "Data" / "sphere2500.txt"
     if not path.exists():

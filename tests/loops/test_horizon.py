@@ -4,9 +4,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from loops.horizon import (HorizonError, HorizonLine, HorizonParams, SampleMode, auc, detect_and_describe,
-                           extract_features, fit_line_ransac, horizon_signal, lobe_sizes, match, nn_matches,
-                           roc_curve, sample_columns)
+from loops.horizon import (
+    HorizonError,
+    HorizonLine,
+    HorizonParams,
+    SampleMode,
+    auc,
+    detect_and_describe,
+    extract_features,
+    fit_line_ransac,
+    horizon_signal,
+    lobe_sizes,
+    match,
+    nn_matches,
+    roc_curve,
+    sample_columns,
+)
 
 
 def texture(x: np.ndarray, seed: int) -> np.ndarray:

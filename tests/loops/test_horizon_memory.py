@@ -8,8 +8,15 @@ import zipfile
 import numpy as np
 import pytest
 
-from loops.horizon import (MEMORY_VERSION, HorizonLine, HorizonParams, LandmarkMemory, MemoryFormatError,
-                           extract_features, load_memory)
+from loops.horizon import (
+    MEMORY_VERSION,
+    HorizonLine,
+    HorizonParams,
+    LandmarkMemory,
+    MemoryFormatError,
+    extract_features,
+    load_memory,
+)
 
 from .test_horizon import horizon_image, texture
 

@@ -6,7 +6,7 @@ import pytest
 
 from loops.cdvs.groundtruth import loop_labels, pair_overlaps
 from loops.cdvs.model import LoopModel, fit_curve, isotonic
-from odometry.camera import CameraModel
+from odometry.shared.camera import CameraModel
 
 CAM = CameraModel(640, 480, 500.0, 500.0, 319.5, 239.5, camera_height=0.5)  # footprint 0.64 m x 0.48 m
 

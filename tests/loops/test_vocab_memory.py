@@ -2,7 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
-from loops.vocab import (EmptyMemoryError, NoFeaturesError, Scores, VisualMemory, evaluate, merge_max, preset)
+from loops.vocab import EmptyMemoryError, NoFeaturesError, Scores, VisualMemory, evaluate, merge_max, preset
 
 from ._vocab_helpers import perturb, texture
 

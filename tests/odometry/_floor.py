@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from odometry.camera import CameraModel
+from odometry.shared.camera import CameraModel
 
 
 def texture(shared_data, name="gazebo_models_ccby3/robocup09_spl_field__carpet.jpg") -> np.ndarray:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from odometry.fusion import FusionConfig, Interpolation, fuse_wheel_gyro
-from odometry.poses import between, compose, integrate, wrap_angle
+from odometry.shared.poses import between, compose, integrate, wrap_angle
 
 WHEEL_DT, GYRO_DT, FRAME_DT = 0.02, 0.01, 0.1
 # the streams below sample continuous rates on two different clocks: read them linearly

@@ -4,10 +4,11 @@ import math
 import numpy as np
 import pytest
 
-from odometry.camera import CameraModel
-from odometry.footprint import footprint_overlap, footprint_polygon, overlap_matrix, overlap_pairs
-from odometry.poses import (between, compose, integrate, inverse, quat_to_yaw, read_tum, relative_motions,
-                            rotmat_to_quat, quat_to_rotmat, se2_to_tum, tum_to_se2, wrap_angle, write_tum, TumFormatError)
+from odometry.shared.camera import CameraModel
+from odometry.shared.footprint import footprint_overlap, footprint_polygon, overlap_matrix, overlap_pairs
+from odometry.shared.poses import between, compose, integrate, inverse, relative_motions, wrap_angle
+from odometry.shared.rotations import quat_to_rotmat, quat_to_yaw, rotmat_to_quat
+from odometry.shared.tum import TumFormatError, read_tum, se2_to_tum, tum_to_se2, write_tum
 
 CAM = CameraModel(640, 480, 500.0, 500.0, 319.5, 239.5, camera_height=0.5)
 DIST = CameraModel(640, 480, 480.0, 470.0, 322.0, 236.0, distortion=(-0.28, 0.07, 0.001, -0.0012, 0.0),
@@ -145,7 +146,7 @@ def test_atomic_write_permissions_and_no_partial_file(tmp_path):
     import os
     import stat
 
-    from odometry.atomic_io import atomic_path, atomic_write_text
+    from odometry.shared.atomic_io import atomic_path, atomic_write_text
 
     f = tmp_path / "out.txt"
     atomic_write_text(f, "hello\n")

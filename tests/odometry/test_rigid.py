@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from odometry.poses import compose, transform_points, inverse
 from odometry.rigid import apply, kabsch_2d, ransac_rigid_2d, rigid_covariance
+from odometry.shared.poses import compose, inverse, transform_points
 
 
 @pytest.mark.parametrize("delta", [(0.013, -0.004, 0.021), (-1.5, 2.0, 2.9), (0.0, 0.0, -3.1), (1e-4, 0.0, 0.0)])

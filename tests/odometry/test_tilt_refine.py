@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from odometry.camera import CameraModel
-from odometry.poses import inverse, transform_points
 from odometry.rigid import kabsch_2d
+from odometry.shared.camera import CameraModel
+from odometry.shared.poses import inverse, transform_points
 from odometry.tilt_refine import refine_planar_tilt
 
 CAM = CameraModel(width=640, height=480, fx=500.0, fy=500.0, cx=319.5, cy=239.5,

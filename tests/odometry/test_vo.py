@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry.poses import between, compose, integrate, wrap_angle
+from odometry.shared.poses import between, compose, integrate, wrap_angle
 from odometry.vo import Reference, VisualOdometry, VOConfig, VOStatus, run_visual_odometry
 from tests.odometry._floor import FloorRenderer, camera, synthetic_texture
 
@@ -178,7 +178,7 @@ def test_bad_timestamps_and_config():
     with pytest.raises(ValueError, match="unknown VO preset"):
         VOConfig.preset("accurate")
     with pytest.raises(ValueError, match="downward camera"):
-        from odometry.camera import CameraModel
+        from odometry.shared.camera import CameraModel
         VisualOdometry(CameraModel(640, 480, 500, 500, 319.5, 239.5))
 
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from odometry.poses import between, read_tum, tum_to_se2
+from odometry.shared.poses import between
+from odometry.shared.tum import read_tum, tum_to_se2
 from vslam.bench.odometry import drift_metrics
 from vslam.cli.main import main
 

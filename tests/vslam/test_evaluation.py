@@ -10,8 +10,9 @@ from evo.core import metrics as em
 from evo.core import sync
 from evo.core.trajectory import PoseTrajectory3D
 
-from odometry.camera import CameraModel
-from odometry.poses import integrate, se2_to_tum, tum_to_se3_matrices, write_tum
+from odometry.shared.camera import CameraModel
+from odometry.shared.poses import integrate
+from odometry.shared.tum import se2_to_tum, tum_to_se3_matrices, write_tum
 from vslam.cli.main import main
 from vslam.evaluation import Alignment, evaluate, start_to_end_error
 from vslam.evaluation.loops import LoopTable, loop_precision_recall

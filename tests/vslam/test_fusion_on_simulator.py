@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from odometry.fusion import fuse_wheel_gyro
-from odometry.poses import between, wrap_angle
+from odometry.shared.poses import between, wrap_angle
 from vslam.sim import SensorNoise, SimConfig, plan_motion
 from vslam.sim.randomness import keyed_rng
 from vslam.sim.sensors import gyro_measurements, wheel_measurements

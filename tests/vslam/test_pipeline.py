@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from odometry.poses import read_tum, tum_to_se2
+from odometry.shared.tum import read_tum, tum_to_se2
 from vslam.cli.main import main
 from vslam.io import open_sequence
 from vslam.pipeline import Pipeline, PipelineConfig

@@ -3,7 +3,7 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry.camera import CameraModel
+from odometry.shared.camera import CameraModel
 from vslam.recording import RunRecorder
 
 rrchunk = pytest.importorskip("rerun.chunk")

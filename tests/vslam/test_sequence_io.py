@@ -5,9 +5,17 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry.camera import CameraModel
-from vslam.errors import (CalibrationError, CsvFormatError, EmptySequenceError, ImageReadError, MissingFileError,
-                          NonFiniteValueError, TimestampOrderError, UnknownColumnError)
+from odometry.shared.camera import CameraModel
+from vslam.errors import (
+    CalibrationError,
+    CsvFormatError,
+    EmptySequenceError,
+    ImageReadError,
+    MissingFileError,
+    NonFiniteValueError,
+    TimestampOrderError,
+    UnknownColumnError,
+)
 from vslam.io import open_sequence, read_camera_yaml, write_sequence
 
 CAMERA_YAML = """width: 64

@@ -7,13 +7,13 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry.poses import transform_points
+from odometry.shared.poses import integrate_arcs, transform_points
 from vslam.cli.main import main
 from vslam.errors import ImageReadError
 from vslam.io import open_sequence
 from vslam.sim import Effects, Floor, FloorType, SensorNoise, SimConfig, plan_motion, simulate
 from vslam.sim.render import FrameRenderer
-from vslam.sim.trajectory import TrajectoryKind, integrate_controls
+from vslam.sim.trajectory import TrajectoryKind
 
 SMALL = SimConfig(width=320, height=240, focal=250.0, length=2.0, fps=10.0, speed=0.5)
 
@@ -53,7 +53,7 @@ def test_noise_free_odometry_integrates_to_ground_truth(tmp_path, kind):
     seq = open_sequence(simulate(cfg, tmp_path / "s").path)
     odo = seq.odometry
     dt = np.diff(np.append(odo.timestamps, odo.timestamps[-1] + 0.01))
-    poses = integrate_controls(odo.v, odo.omega, dt)               # rows hold until the next row
+    poses = integrate_arcs(odo.v, odo.omega, dt)               # rows hold until the next row
     at_frames = poses[np.searchsorted(odo.timestamps, seq.timestamps - 1e-9)]
     gt = seq.groundtruth_planar()
     assert np.abs(at_frames[:, :2] - gt[:, :2]).max() < 1e-6

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from odometry.atomic_io import atomic_write_text
+from odometry.shared.atomic_io import atomic_write_text
 
 
 def time_calls(fn: Callable[[], Any], repeat: int = 20, warmup: int = 2) -> list[float]:

@@ -71,7 +71,7 @@ def run(a: argparse.Namespace) -> int:
     from loops.cdvs.detector import detect_loops
     from loops.cdvs.model import LoopModel
     from loops.cdvs.plots import plot_score_matrices
-    from odometry.footprint import overlap_pairs
+    from odometry.shared.footprint import overlap_pairs
     from vslam.bench._common import format_table, median, time_calls, write_json
     from vslam.evaluation.loops import LoopTable, loop_precision_recall
     from vslam.io import open_sequence

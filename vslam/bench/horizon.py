@@ -53,7 +53,7 @@ class Bank:
 def read_kitti_snippet(folder: Path) -> tuple[dict, np.ndarray, list[Path]]:
     """(calibration {fx, cx, cy}, (N, 3, 4) camera poses, image paths) of a kitti_snippets folder, via the
     toolkit's KITTI reader."""
-    from odometry.poses import tum_to_se3_matrices
+    from odometry.shared.tum import tum_to_se3_matrices
     from vslam.io import read_kitti
 
     seq = read_kitti(folder)
@@ -220,7 +220,7 @@ class SiftReference:
 
 def _kitti_pairs_csv(data_dir: Path, out_csv: Path) -> Path:
     """The KITTI pairs of ../shared/data/pairs as a PAIRS.csv (a, b, row_a, row_b, label) for `vslam horizon pairs`."""
-    from odometry.atomic_io import atomic_write_text
+    from odometry.shared.atomic_io import atomic_write_text
 
     pairs_dir = data_dir / "pairs"
     lines = ["a,b,row_a,row_b,label"]
@@ -267,7 +267,7 @@ def run(args: argparse.Namespace) -> int:
     import cv2
 
     from loops.horizon import HorizonParams, extract_features, match, roc_curve, tpr_at_fpr
-    from odometry.atomic_io import atomic_path
+    from odometry.shared.atomic_io import atomic_path
     from vslam.bench._common import format_table, write_json
     from vslam.cli.cmd_horizon import parse_overrides, score_pairs_file, write_roc_png
     from vslam.paths import shared_data_dir

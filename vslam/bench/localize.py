@@ -183,7 +183,7 @@ def load_set(name: str, data: Path, quick: bool) -> PlaceSet:
 
 
 def write_truth(path: Path, ps: PlaceSet) -> None:
-    from odometry.atomic_io import atomic_write_text
+    from odometry.shared.atomic_io import atomic_write_text
 
     rows = ["query,key"] + [f"{q},{ps.keys[k][0]}" for q, ks in ps.truth.items() for k in ks]
     atomic_write_text(path, "\n".join(rows) + "\n")
@@ -632,7 +632,7 @@ def plot_sweep(path: Path, rows, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from odometry.atomic_io import atomic_path
+    from odometry.shared.atomic_io import atomic_path
 
     th = [r[0] for r in rows]
     fig, ax = plt.subplots(figsize=(5, 3.2), dpi=100)
@@ -670,7 +670,7 @@ def repeat_table(values: dict) -> str:
 
 def run_repeat_study(args, bench: Bench, data: Path, out: Path) -> int:
     """Gap study: do Lloyd iterations, k-means++ restarts or more descriptors make builds steadier?"""
-    from odometry.atomic_io import atomic_write_text
+    from odometry.shared.atomic_io import atomic_write_text
     from vslam.bench._common import write_json
 
     n_builds = args.builds or (10 if args.quick else 30)
@@ -693,7 +693,7 @@ def run_repeat_study(args, bench: Bench, data: Path, out: Path) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from loops.vocab import DescriptorName, preset
-    from odometry.atomic_io import atomic_write_text
+    from odometry.shared.atomic_io import atomic_write_text
     from vslam.bench._common import format_table, write_json
     from vslam.cli.cmd_localize import format_paper_table, save_pr_plot
     from vslam.paths import shared_data_dir

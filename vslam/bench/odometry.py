@@ -54,7 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def drift_metrics(est: np.ndarray, gt: np.ndarray, segments=SEGMENTS, step: int = 5) -> dict:
     """Drift of planar poses `est` against `gt` (both (N, 3), same frames; NaN gt rows are skipped)."""
-    from odometry.poses import between, wrap_angle
+    from odometry.shared.poses import between, wrap_angle
 
     ok = np.all(np.isfinite(gt), axis=1)
     est, gt = est[ok], gt[ok]
@@ -96,7 +96,7 @@ class _AffineBaseline:
     def __call__(self, est) -> None:
         import cv2
 
-        from odometry.poses import compose
+        from odometry.shared.poses import compose
         from odometry.vo import Reference, VOStatus
 
         i = est.index
@@ -141,7 +141,7 @@ def _simulate(floor: str, trajectory: str, frames: int, seed: int, where: Path, 
 def run_sequence(path: Path, preset: str = "default", overrides: dict | None = None) -> dict:
     """VO + both baselines on one sequence directory; returns metrics and timings."""
     from odometry.fusion import fuse_wheel_gyro
-    from odometry.poses import between
+    from odometry.shared.poses import between
     from odometry.vo import VOConfig, VOStatus, run_visual_odometry
     from vslam.io import open_sequence
 
@@ -287,7 +287,6 @@ def run(args: argparse.Namespace) -> int:
     import cv2
 
     from vslam.bench._common import format_table, write_json
-
     from vslam.cli.cmd_odometry import _overrides
 
     if args.frames < 50:

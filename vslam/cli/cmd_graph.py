@@ -59,7 +59,7 @@ def run_optimize(a: argparse.Namespace) -> int:
     import numpy as np
 
     from graph import GraphParams, optimize, read_graph, write_graph
-    from odometry.atomic_io import atomic_write_text
+    from odometry.shared.atomic_io import atomic_write_text
 
     data = read_graph(a.input)
     params = getattr(GraphParams, a.preset)()

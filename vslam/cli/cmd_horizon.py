@@ -17,6 +17,8 @@ import math
 from collections import OrderedDict
 from pathlib import Path
 
+from vslam.errors import VslamError
+
 NAME = "horizon"
 HELP = "1D SURF horizon landmarks: memorise, recognise, score pairs, evaluate"
 DESCRIPTION = __doc__
@@ -33,9 +35,9 @@ def parse_horizon(text: str, where: str):
     try:
         vals = [float(p) for p in parts]
     except ValueError:
-        raise ValueError(f"{where}: {text!r} is not a horizon row (a number, or LEFT:RIGHT)") from None
+        raise VslamError(f"{where}: {text!r} is not a horizon row (a number, or LEFT:RIGHT)") from None
     if len(vals) not in (1, 2) or not all(math.isfinite(v) for v in vals):
-        raise ValueError(f"{where}: {text!r} is not a horizon row (a number, or LEFT:RIGHT)")
+        raise VslamError(f"{where}: {text!r} is not a horizon row (a number, or LEFT:RIGHT)")
     return vals[0] if len(vals) == 1 else HorizonLine(vals[0], vals[1])
 
 
@@ -45,14 +47,14 @@ def parse_overrides(params, overrides: list[str]):
     for item in overrides:
         key, sep, value = item.partition("=")
         if not sep:
-            raise ValueError(f"--set expects FIELD=VALUE, got {item!r}")
+            raise VslamError(f"--set expects FIELD=VALUE, got {item!r}")
         try:
             changes[key.strip()] = json.loads(value)
         except json.JSONDecodeError:
             changes[key.strip()] = value
     unknown = sorted(set(changes) - set(params.to_dict()))
     if unknown:
-        raise ValueError(f"--set: unknown HorizonParams field(s): {', '.join(unknown)}")
+        raise VslamError(f"--set: unknown HorizonParams field(s): {', '.join(unknown)}")
     return params.replace(**changes)
 
 
@@ -80,7 +82,7 @@ def _extract(path: Path, horizon, params):
     try:
         return extract_features(img, horizon, params)
     except HorizonError as exc:
-        raise ValueError(f"{path}: {exc}") from None
+        raise VslamError(f"{path}: {exc}") from None
 
 
 class _FeatureCache:
@@ -110,14 +112,14 @@ def read_pairs_csv(path: Path) -> tuple[list[str], list[dict]]:
         header = reader.fieldnames or []
         missing = [c for c in PAIRS_COLUMNS if c not in header]
         if missing:
-            raise ValueError(f"{path} line 1: missing column(s) {', '.join(missing)} (need {','.join(PAIRS_COLUMNS)})")
+            raise VslamError(f"{path} line 1: missing column(s) {', '.join(missing)} (need {','.join(PAIRS_COLUMNS)})")
         rows = []
         for line_no, row in enumerate(reader, start=2):
             if None in row or any(row[c] is None for c in header):
-                raise ValueError(f"{path} line {line_no}: expected {len(header)} fields")
+                raise VslamError(f"{path} line {line_no}: expected {len(header)} fields")
             for c in ("a", "b"):
                 if not row[c].strip():
-                    raise ValueError(f"{path} line {line_no}, field {c}: empty image path")
+                    raise VslamError(f"{path} line {line_no}, field {c}: empty image path")
             for c in ("row_a", "row_b"):
                 row[f"_{c}"] = parse_horizon(row[c], f"{path} line {line_no}, field {c}")
             row["_line"] = line_no
@@ -129,13 +131,13 @@ def score_pairs_file(pairs_csv: Path, out_csv: Path, params) -> list[dict]:
     """Score every pair of PAIRS.csv (b is the test horizon, a the stored one: x_b = b_s * x_a + b_d) and write
     SCORES.csv atomically: the input columns, then score, score_ransac, b_s, b_d. Returns the output rows."""
     from loops.horizon import match
-    from odometry.atomic_io import atomic_path
+    from odometry.shared.atomic_io import atomic_path
 
     pairs_csv, out_csv = Path(pairs_csv), Path(out_csv)
     header, rows = read_pairs_csv(pairs_csv)
     clash = [c for c in SCORE_COLUMNS if c in header]
     if clash:
-        raise ValueError(f"{pairs_csv} line 1: column(s) {', '.join(clash)} would be overwritten by the scores")
+        raise VslamError(f"{pairs_csv} line 1: column(s) {', '.join(clash)} would be overwritten by the scores")
     base = pairs_csv.parent
     cache = _FeatureCache(params)
     out_rows = []
@@ -162,7 +164,7 @@ def write_roc_png(path: Path, curves: dict[str, tuple], title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from odometry.atomic_io import atomic_path
+    from odometry.shared.atomic_io import atomic_path
 
     fig, ax = plt.subplots(figsize=(4.8, 4.2), dpi=100)
     for name, (fpr, tpr, a) in curves.items():
@@ -190,12 +192,12 @@ def _memorise(args: argparse.Namespace) -> int:
     if args.append and args.out.exists():
         memory = load_memory(args.out)
         if args.preset != "paper" or args.overrides:
-            raise ValueError("--append uses the parameters stored in the memory; drop --preset / --set")
+            raise VslamError("--append uses the parameters stored in the memory; drop --preset / --set")
     else:
         memory = LandmarkMemory(_params_from_args(args))
     names = args.names or [p.stem for p, _ in entries]
     if len(names) != len(entries):
-        raise ValueError(f"--names gives {len(names)} names for {len(entries)} images")
+        raise VslamError(f"--names gives {len(names)} names for {len(entries)} images")
     for name, (path, horizon) in zip(names, entries):
         feats = _extract(path, horizon, memory.params)
         memory.add(name, feats, str(path), horizon)
@@ -207,7 +209,7 @@ def _memorise(args: argparse.Namespace) -> int:
 
 def _image_horizons(args: argparse.Namespace) -> list[tuple[Path, object]]:
     if args.row is None:
-        raise ValueError("give the horizon with --row R (or LEFT:RIGHT for a tilted horizon line)")
+        raise VslamError("give the horizon with --row R (or LEFT:RIGHT for a tilted horizon line)")
     horizon = parse_horizon(args.row, "--row")
     return [(Path(p), horizon) for p in args.images]
 
@@ -217,7 +219,7 @@ def _recognise(args: argparse.Namespace) -> int:
 
     memory = load_memory(args.memory)
     if len(memory) == 0:
-        raise ValueError(f"{args.memory}: the memory holds no landmarks")
+        raise VslamError(f"{args.memory}: the memory holds no landmarks")
     out = []
     for path, horizon in _image_horizons(args):
         feats = _extract(path, horizon, memory.params)
@@ -233,7 +235,7 @@ def _recognise(args: argparse.Namespace) -> int:
                     "score": score_nn, "b_s": None if math.isnan(b_s) else b_s,     # null: no consistent line
                     "b_d": None if math.isnan(b_d) else b_d, "threshold": rec.threshold, "scores": rec.scores})
     if args.json:
-        from odometry.atomic_io import atomic_write_text
+        from odometry.shared.atomic_io import atomic_write_text
 
         atomic_write_text(args.json, json.dumps(out, indent=2, default=float) + "\n")
     return 0
@@ -259,25 +261,25 @@ def _evaluate(args: argparse.Namespace) -> int:
         need = [args.label_column, *SCORE_COLUMNS[:2]]
         missing = [c for c in need if c not in header]
         if missing:
-            raise ValueError(f"{path} line 1: missing column(s) {', '.join(missing)}")
+            raise VslamError(f"{path} line 1: missing column(s) {', '.join(missing)}")
         labels, cols = [], {c: [] for c in SCORE_COLUMNS[:2]}
         for line_no, row in enumerate(reader, start=2):
             try:
                 lab = int(float(row[args.label_column]))
             except (TypeError, ValueError):
-                raise ValueError(f"{path} line {line_no}, field {args.label_column}: "
+                raise VslamError(f"{path} line {line_no}, field {args.label_column}: "
                                  f"{row[args.label_column]!r} is not 0 or 1") from None
             if lab not in (0, 1):
-                raise ValueError(f"{path} line {line_no}, field {args.label_column}: {lab} is not 0 or 1")
+                raise VslamError(f"{path} line {line_no}, field {args.label_column}: {lab} is not 0 or 1")
             labels.append(lab)
             for c in cols:
                 try:
                     cols[c].append(float(row[c]))
                 except (TypeError, ValueError):
-                    raise ValueError(f"{path} line {line_no}, field {c}: {row[c]!r} is not a number") from None
+                    raise VslamError(f"{path} line {line_no}, field {c}: {row[c]!r} is not a number") from None
     y = np.array(labels, bool)
     if y.all() or not y.any():
-        raise ValueError(f"{path}: need both label 1 and label 0 rows for an ROC ({int(y.sum())} / {len(y)} are 1)")
+        raise VslamError(f"{path}: need both label 1 and label 0 rows for an ROC ({int(y.sum())} / {len(y)} are 1)")
     print(f"{len(y)} pairs: {int(y.sum())} matched, {int((~y).sum())} unmatched")
     curves = {}
     for c, name in (("score", "NN"), ("score_ransac", "NN+RANSAC")):

@@ -16,6 +16,8 @@ import io
 import json
 from pathlib import Path
 
+from vslam.errors import VslamError
+
 NAME = "localize"
 HELP = "visual-memory localisation (vocabulary-tree bag of words): build, query, eval"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
@@ -38,7 +40,7 @@ def list_images(folder: str | Path) -> list[tuple[str, Path]]:
         out = [(str(p.relative_to(folder)), p) for p in sorted(folder.rglob("*"))
                if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()]
     if not out:
-        raise ValueError(f"{folder}: no images found (expected image files or a frames.csv)")
+        raise VslamError(f"{folder}: no images found (expected image files or a frames.csv)")
     return out
 
 
@@ -66,17 +68,17 @@ def read_truth(path: str | Path, query_names: list[str], key_names: list[str]) -
         reader = csv.reader(f)
         header = next(reader, None)
         if header is None or [h.strip() for h in header[:2]] != ["query", "key"]:
-            raise ValueError(f"{path}: line 1: header must be 'query,key'")
+            raise VslamError(f"{path}: line 1: header must be 'query,key'")
         for line, row in enumerate(reader, start=2):
             if not row or all(not c.strip() for c in row):
                 continue
             if len(row) < 2:
-                raise ValueError(f"{path}: line {line}: expected 2 fields 'query,key', got {len(row)}")
+                raise VslamError(f"{path}: line {line}: expected 2 fields 'query,key', got {len(row)}")
             q, k = row[0].strip(), row[1].strip()
             if q not in q_index:
-                raise ValueError(f"{path}: line {line}: field 'query': no query image named {q!r}")
+                raise VslamError(f"{path}: line {line}: field 'query': no query image named {q!r}")
             if k not in k_index:
-                raise ValueError(f"{path}: line {line}: field 'key': no key image named {k!r}")
+                raise VslamError(f"{path}: line {line}: field 'key': no key image named {k!r}")
             truth.setdefault(query_names[q_index[q]], []).append(k_index[k])
     return truth
 
@@ -187,7 +189,7 @@ def _run_query(args: argparse.Namespace) -> int:
 
 
 def _write_csv(path, header, rows) -> None:
-    from odometry.atomic_io import atomic_write_text
+    from odometry.shared.atomic_io import atomic_write_text
 
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -198,7 +200,7 @@ def _write_csv(path, header, rows) -> None:
 
 def _run_eval(args: argparse.Namespace) -> int:
     if args.descriptor is None:
-        raise ValueError("--descriptor is required for eval")
+        raise VslamError("--descriptor is required for eval")
     from loops.vocab import VisualMemory, evaluate
 
     params = params_from_args(args)
@@ -207,7 +209,7 @@ def _run_eval(args: argparse.Namespace) -> int:
     key_names, query_names = [n for n, _ in keys], [n for n, _ in queries]
     truth = read_truth(args.truth, query_names, key_names)
     if not truth:
-        raise ValueError(f"{args.truth}: no ground-truth rows")
+        raise VslamError(f"{args.truth}: no ground-truth rows")
     memory = VisualMemory.build((read_image(p) for _, p in keys), key_names, params)
     ev = evaluate(memory, ((n, read_image(p), None) for n, p in queries), truth)
     write_report(Path(args.out), ev, memory, title=f"{Path(args.memory_dir).name} vs {Path(args.queries_dir).name}")
@@ -217,7 +219,7 @@ def _run_eval(args: argparse.Namespace) -> int:
 
 def write_report(out: Path, ev, memory, title: str) -> dict:
     """ranking.csv, per_query.csv, report.md, metrics.json and pr.png for one evaluation; returns the metrics."""
-    from odometry.atomic_io import atomic_write_text
+    from odometry.shared.atomic_io import atomic_write_text
 
     s = ev.summary()
     pr = ev.pr()
@@ -268,7 +270,7 @@ def save_pr_plot(path: Path, curves: dict, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from odometry.atomic_io import atomic_path
+    from odometry.shared.atomic_io import atomic_path
 
     fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
     for label, pr in curves.items():

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from vslam.errors import VslamError
+
 NAME = "loops"
 HELP = "detect loops in an image sequence with compact descriptors (writes loops.csv)"
 
@@ -42,12 +44,12 @@ def run(a: argparse.Namespace) -> int:
     from loops.cdvs.database import DatabaseParams
     from loops.cdvs.detector import LOOPS_CSV_HEADER, detect_loops
     from loops.cdvs.model import LoopModel
-    from odometry.atomic_io import atomic_write_text
+    from odometry.shared.atomic_io import atomic_write_text
     from vslam.cli.progress import Progress
     from vslam.io import open_sequence
 
     if a.every < 1 or a.shortlist < 1 or a.exclude_recent < 0 or a.confirmations < 1:
-        raise ValueError("--every, --shortlist and --confirmations must be >= 1 and --exclude-recent >= 0")
+        raise VslamError("--every, --shortlist and --confirmations must be >= 1 and --exclude-recent >= 0")
     seq = open_sequence(a.sequence, camera=a.camera, fps=a.fps)
     model = LoopModel.load(a.model) if a.model else LoopModel.default()
     downward = seq.camera is not None and seq.camera.camera_height is not None

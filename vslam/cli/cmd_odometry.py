@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from vslam.errors import VslamError
+
 NAME = "odometry"
 HELP = "downward-camera visual odometry: writes trajectory_vo.txt (TUM) and odometry.csv"
 DESCRIPTION = (
@@ -35,7 +37,7 @@ def _overrides(items: list[str]) -> dict:
     out = {}
     for item in items:
         if "=" not in item:
-            raise ValueError(f"--set {item!r}: expected KEY=VALUE")
+            raise VslamError(f"--set {item!r}: expected KEY=VALUE")
         k, v = item.split("=", 1)
         out[k.strip()] = yaml.safe_load(v)
     return out
@@ -47,16 +49,16 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from odometry.atomic_io import atomic_write_text
     from odometry.fusion import FusionConfig, fuse_wheel_gyro
-    from odometry.poses import write_tum
+    from odometry.shared.atomic_io import atomic_write_text
+    from odometry.shared.tum import write_tum
     from odometry.vo import VOConfig, VOStatus, run_visual_odometry
     from vslam.io import open_sequence
 
     seq = open_sequence(args.sequence, camera=args.camera)
     camera = seq.require_camera()
     if not camera.is_downward:
-        raise ValueError(f"{args.sequence}: the camera has no camera_height; visual odometry needs a downward camera")
+        raise VslamError(f"{args.sequence}: the camera has no camera_height; visual odometry needs a downward camera")
     config = VOConfig.from_dict(_overrides(args.set), base=VOConfig.preset(args.preset))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -91,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
            f"(median); wrote {out / 'trajectory_vo.txt'} and {out / 'odometry.csv'}")
     gt = seq.groundtruth_planar()
     if gt is not None and np.all(np.isfinite(gt[[0, -1]])):
-        from odometry.poses import between
+        from odometry.shared.poses import between
 
         g = between(gt[0], gt)
         dist = float(np.sum(np.hypot(*np.diff(g[:, :2][np.all(np.isfinite(g), 1)], axis=0).T)))

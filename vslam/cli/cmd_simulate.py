@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 
+from vslam.errors import VslamError
+
 NAME = "simulate"
 HELP = "render a simulated downward-camera sequence (images, wheel odometry, gyro, ground truth)"
 DESCRIPTION = ("Render a downward-camera sequence over a floor built from real ground-texture photographs. "
@@ -72,16 +74,16 @@ def config_from_args(a: argparse.Namespace):
     effects = replace(effects, dropped_frames=a.dropped_frames, corrupt_frames=a.corrupt_frames, exposure=a.exposure)
     for name, v in (("--dropped-frames", a.dropped_frames), ("--corrupt-frames", a.corrupt_frames)):
         if not 0.0 <= v <= 1.0:
-            raise ValueError(f"{name} must be a probability in [0, 1], got {v}")
+            raise VslamError(f"{name} must be a probability in [0, 1], got {v}")
     length = a.length
     if length is None:
         from vslam.sim.simulate import length_for_frames
 
         length = 10.0 if a.frames is None else length_for_frames(a.frames, a.fps, a.speed)
     if a.frames is not None and a.frames < 2:
-        raise ValueError("--frames must be at least 2")
+        raise VslamError("--frames must be at least 2")
     if length <= 0 or a.speed <= 0 or a.fps <= 0 or a.camera_height <= 0:
-        raise ValueError("--length, --speed, --fps and --camera-height must be positive")
+        raise VslamError("--length, --speed, --fps and --camera-height must be positive")
     return SimConfig(floor=a.floor, trajectory=a.trajectory, length=length, laps=a.laps, speed=a.speed, fps=a.fps,
                      width=w, height=h, focal=a.focal if a.focal else 500.0 * w / 640.0,
                      camera_height=a.camera_height,

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from vslam.errors import VslamError
+
 NAME = "train-loops"
 HELP = "learn the loop model P(loop|score) and per-mode thresholds from odometry-labelled sequences"
 
@@ -38,9 +40,9 @@ def _parse_modes(text: str) -> tuple[int, ...]:
     try:
         modes = tuple(sorted({int(m) for m in text.split(",") if m.strip()}))
     except ValueError:
-        raise ValueError(f"--modes: expected comma-separated integers 1-6, got {text!r}") from None
+        raise VslamError(f"--modes: expected comma-separated integers 1-6, got {text!r}") from None
     if not modes or any(m < 1 or m > 6 for m in modes):
-        raise ValueError(f"--modes: modes must be in 1..6, got {text!r}")
+        raise VslamError(f"--modes: modes must be in 1..6, got {text!r}")
     return modes
 
 
@@ -49,7 +51,7 @@ def fused_trajectory(seq):
     from odometry.fusion import fuse_wheel_gyro
 
     if seq.odometry is None:
-        raise ValueError(f"{seq.root or seq.name}: train-loops needs wheel odometry (odometry.csv)")
+        raise VslamError(f"{seq.root or seq.name}: train-loops needs wheel odometry (odometry.csv)")
     imu = seq.imu
     fused = fuse_wheel_gyro(seq.odometry.timestamps, seq.odometry.v, seq.odometry.omega,
                             None if imu is None else imu.timestamps, None if imu is None else imu.gyro_z,
@@ -65,17 +67,23 @@ def run(a: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from loops.cdvs.loop_training import (PairScores, encode_all, fit_loop_model, floor_params, score_sequence,
-                                          trustworthy_pairs)
+    from loops.cdvs.loop_training import (
+        PairScores,
+        encode_all,
+        fit_loop_model,
+        floor_params,
+        score_sequence,
+        trustworthy_pairs,
+    )
     from loops.cdvs.plots import plot_loop_model
     from loops.cdvs.trained import load_trained
     from vslam.io import open_sequence
 
     modes = _parse_modes(a.modes)
     if not 0 < a.overlap <= 1:
-        raise ValueError(f"--overlap must be in (0, 1], got {a.overlap}")
+        raise VslamError(f"--overlap must be in (0, 1], got {a.overlap}")
     if a.every < 1:
-        raise ValueError("--every must be >= 1")
+        raise VslamError("--every must be >= 1")
     trained = load_trained()
     scored, sources = [], []
     for path in a.sequences:
@@ -83,7 +91,7 @@ def run(a: argparse.Namespace) -> int:
         seq = open_sequence(path)
         cam = seq.require_camera() if hasattr(seq, "require_camera") else seq.camera
         if cam is None or cam.camera_height is None:
-            raise ValueError(f"{path}: camera.yaml has no camera_height: J needs a downward-facing camera")
+            raise VslamError(f"{path}: camera.yaml has no camera_height: J needs a downward-facing camera")
         fused = fused_trajectory(seq)
         idx = np.arange(0, len(seq), a.every)
         key = f"{Path(path).resolve().name}-{zlib.crc32(str(Path(path).resolve()).encode()):08x}-" \
@@ -121,7 +129,7 @@ def run(a: argparse.Namespace) -> int:
                   "descriptor_preset": "CdvsParams.floor"}
     min_overlap = a.overlap + 0.05 if a.min_overlap is None else (None if a.min_overlap < 0 else a.min_overlap)
     if min_overlap is not None and min_overlap > 1:
-        raise ValueError(f"--min-overlap must be <= 1, got {a.min_overlap}")
+        raise VslamError(f"--min-overlap must be <= 1, got {a.min_overlap}")
     provenance["min_overlap"] = min_overlap
     model = fit_loop_model(scored, a.overlap, provenance, min_overlap=min_overlap)
     out = Path(a.out)

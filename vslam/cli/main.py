@@ -18,14 +18,17 @@ import pkgutil
 import sys
 from types import ModuleType
 
-import vslam.cli as _cli_pkg
+import vslam.cli as cli_package
+from odometry.shared.errors import ToolkitError
 
-# Errors a user can cause with bad input: reported as one clear line, no traceback.
-USER_ERRORS = (ValueError, OSError, KeyError)
+# Errors a user can cause with bad input: reported as one clear line, no traceback. ToolkitError is the common base
+# of the package roots (OdometryError, LoopsError, GraphError, VslamError) and of the shared layer's errors; any
+# other exception is a bug and keeps its traceback.
+USER_ERRORS = (ToolkitError, OSError)
 
 
 def _command_modules() -> list[ModuleType]:
-    names = sorted(m.name for m in pkgutil.iter_modules(_cli_pkg.__path__) if m.name.startswith("cmd_"))
+    names = sorted(m.name for m in pkgutil.iter_modules(cli_package.__path__) if m.name.startswith("cmd_"))
     return [importlib.import_module(f"vslam.cli.{n}") for n in names]
 
 

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from odometry.camera import CameraModel
-from odometry.footprint import DEFAULT_OVERLAP_THRESHOLD, overlap_pairs
+from odometry.shared.camera import CameraModel
+from odometry.shared.footprint import DEFAULT_OVERLAP_THRESHOLD, overlap_pairs
+from vslam.errors import VslamError
 
 LOOPS_HEADER = ("query_frame", "match_frame", "global_score", "local_score", "probability", "accepted")
 RUN_LOOPS_HEADER = LOOPS_HEADER + ("inlier",)
@@ -36,7 +37,7 @@ def read_loops_csv(path: str | Path) -> LoopTable:
         cols = reader.fieldnames or []
         missing = [c for c in LOOPS_HEADER if c not in cols]
         if missing:
-            raise ValueError(f"{path}:1: field '{missing[0]}': missing column (expected {','.join(LOOPS_HEADER)})")
+            raise VslamError(f"{path}:1: field '{missing[0]}': missing column (expected {','.join(LOOPS_HEADER)})")
         rows = list(reader)
     def col(name, kind=float):
         out = []
@@ -45,7 +46,7 @@ def read_loops_csv(path: str | Path) -> LoopTable:
             try:
                 out.append(kind(v) if v != "" else (np.nan if kind is float else -1))
             except ValueError:
-                raise ValueError(f"{path}:{i}: field '{name}': not a number: {v!r}") from None
+                raise VslamError(f"{path}:{i}: field '{name}': not a number: {v!r}") from None
         return np.asarray(out)
     inl = None
     if "inlier" in cols:
@@ -74,7 +75,7 @@ def loop_precision_recall(camera: CameraModel, gt_poses: np.ndarray, loops: Loop
     out = {"reported": int(len(q)), "true_positives": tp, "false_positives": fp,
            "precision": tp / (tp + fp) if tp + fp else float("nan")}
     if queried is not None:
-        from odometry.footprint import overlap_matrix
+        from odometry.shared.footprint import overlap_matrix
 
         queried = np.asarray(sorted(set(int(i) for i in queried)))
         P = gt_poses[queried]

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vslam.errors import VslamError
+
 
 class Alignment(str, enum.Enum):
     NONE = "none"
@@ -54,7 +56,7 @@ def associate(t_a: np.ndarray, t_b: np.ndarray, max_diff: float = 0.01) -> tuple
     if len(short) == 0 or len(long_) == 0:
         return np.zeros(0, int), np.zeros(0, int)
     if np.any(np.diff(long_) < 0):
-        raise ValueError("timestamps must be sorted")
+        raise VslamError("timestamps must be sorted")
     idx = np.clip(np.searchsorted(long_, short, side="right"), 0, len(long_) - 1)
     diff_ub = long_[idx] - short
     diff_lb = np.where(idx > 0, short - long_[np.maximum(idx - 1, 0)], np.inf)
@@ -78,7 +80,7 @@ def umeyama(x: np.ndarray, y: np.ndarray, with_scale: bool = False) -> tuple[np.
     cov = yc.T @ xc / len(x)
     u, d, vt = np.linalg.svd(cov)
     if np.count_nonzero(d > np.finfo(d.dtype).eps) < m - 1:
-        raise ValueError("degenerate point set: alignment is not possible (fewer than 2 distinct positions?)")
+        raise VslamError("degenerate point set: alignment is not possible (fewer than 2 distinct positions?)")
     s_mat = np.eye(m)
     if np.linalg.det(u) * np.linalg.det(vt) < 0:
         s_mat[m - 1, m - 1] = -1
@@ -145,7 +147,7 @@ def rpe_pairs(poses: np.ndarray, delta: float, unit: DeltaUnit | str = DeltaUnit
     if unit == DeltaUnit.FRAMES:
         d = int(delta)
         if d < 1:
-            raise ValueError("RPE delta in frames must be >= 1")
+            raise VslamError("RPE delta in frames must be >= 1")
         if all_pairs:
             i = np.arange(0, max(n - d, 0))
             return np.column_stack([i, i + d])
@@ -218,7 +220,7 @@ def evaluate(t_ref: np.ndarray, ref: np.ndarray, t_est: np.ndarray, est: np.ndar
     """Associate, align and compute APE and RPE (translation and rotation)."""
     ir, ie = associate(t_ref, t_est, max_diff)
     if len(ir) < 2:
-        raise ValueError(f"only {len(ir)} timestamps of the estimate match the reference within {max_diff} s")
+        raise VslamError(f"only {len(ir)} timestamps of the estimate match the reference within {max_diff} s")
     r, e = ref[ir], est[ie]
     aligned, tf = align(r, e, alignment)
     ape_t = ape(r, aligned)
@@ -235,7 +237,7 @@ def start_to_end_error(est_planar: np.ndarray, gt_planar: np.ndarray | None = No
     """Seed 001 Table IV: the estimated pose of the end relative to the start (ideally zero on a closed path).
     With ground truth, also the error of that relative pose against the true one (the robot may not stop exactly
     where it started)."""
-    from odometry.poses import between, wrap_angle
+    from odometry.shared.poses import between, wrap_angle
 
     d = between(est_planar[0], est_planar[-1])
     out = {"dx": float(d[0]), "dy": float(d[1]), "dtheta": float(d[2]), "distance": float(math.hypot(d[0], d[1]))}

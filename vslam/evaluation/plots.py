@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from odometry.atomic_io import atomic_path
+from odometry.shared.atomic_io import atomic_path
 
 
 def _plt():

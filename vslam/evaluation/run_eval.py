@@ -6,11 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-from odometry.atomic_io import atomic_write_text
-from odometry.poses import read_tum, tum_to_se2, tum_to_se3_matrices
+from odometry.shared.atomic_io import atomic_write_text
+from odometry.shared.tum import read_tum, tum_to_se2, tum_to_se3_matrices
+from vslam.errors import VslamError
+from vslam.evaluation import plots
 from vslam.evaluation.loops import loop_precision_recall, read_loops_csv
 from vslam.evaluation.metrics import Alignment, DeltaUnit, align, associate, evaluate, start_to_end_error
-from vslam.evaluation import plots
 
 TRAJECTORIES = {"VO": "trajectory_vo.txt", "SLAM": "trajectory_slam.txt"}
 
@@ -28,12 +29,12 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
     if gt_file is None:
         src = run_info.get("sequence")
         if src is None:
-            raise ValueError(f"{out}: no ground truth given (--gt FILE) and no run.json naming the sequence")
+            raise VslamError(f"{out}: no ground truth given (--gt FILE) and no run.json naming the sequence")
         from vslam.io import open_sequence
 
         seq = open_sequence(src, check_images="none")
         if seq.groundtruth is None:
-            raise ValueError(f"{src}: the sequence has no ground truth; give one with --gt FILE")
+            raise VslamError(f"{src}: the sequence has no ground truth; give one with --gt FILE")
         t_gt, gt = seq.groundtruth.timestamps, seq.groundtruth.poses
     else:
         t_gt, gt = read_tum(gt_file)
@@ -61,7 +62,7 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
         loops = read_loops_csv(out / "loops.csv")
         camera = seq.camera if seq is not None else None
         if camera is None and "camera" in run_info:
-            from odometry.camera import CameraModel
+            from odometry.shared.camera import CameraModel
 
             camera = CameraModel.from_dict(run_info["camera"])
         frame_t = np.asarray(run_info.get("frame_timestamps", [])) if run_info.get("frame_timestamps") else (

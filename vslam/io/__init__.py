@@ -9,12 +9,25 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from odometry.camera import CameraModel
+from odometry.shared.camera import CameraModel
 from vslam.errors import MissingFileError, SequenceError
-from vslam.io.public_formats import (VIDEO_EXTENSIONS, is_kitti, is_tum_rgbd, read_image_folder, read_kitti,
-                                     read_tum_rgbd, read_video)
-from vslam.io.sequence_dir import (SequenceWriter, is_sequence_dir, read_camera_yaml, read_sequence_dir,
-                                   write_camera_yaml, write_sequence)
+from vslam.io.public_formats import (
+    VIDEO_EXTENSIONS,
+    is_kitti,
+    is_tum_rgbd,
+    read_image_folder,
+    read_kitti,
+    read_tum_rgbd,
+    read_video,
+)
+from vslam.io.sequence_dir import (
+    SequenceWriter,
+    is_sequence_dir,
+    read_camera_yaml,
+    read_sequence_dir,
+    write_camera_yaml,
+    write_sequence,
+)
 from vslam.sequence import Sequence
 
 __all__ = ["SequenceWriter", "open_sequence", "read_camera_yaml", "read_image_folder", "read_kitti",

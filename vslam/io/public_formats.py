@@ -11,9 +11,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from odometry.camera import CameraModel
-from odometry.poses import se3_matrices_to_tum
-from vslam.errors import CsvFormatError, EmptySequenceError, MissingFileError, SequenceError, TimestampOrderError
+from odometry.shared.camera import CameraModel
+from odometry.shared.tum import se3_matrices_to_tum
+from vslam.errors import (
+    CsvFormatError,
+    EmptySequenceError,
+    MissingFileError,
+    SequenceError,
+    TimestampOrderError,
+    VslamError,
+)
 from vslam.io.sequence_dir import CAMERA_FILE, read_camera_yaml, read_groundtruth
 from vslam.sequence import FileImages, Sequence, Trajectory, VideoImages
 
@@ -202,7 +209,7 @@ def read_image_folder(root: str | os.PathLike, camera: CameraModel | str | None 
     if not names:
         raise EmptySequenceError(root, f"no images ({', '.join(IMAGE_EXTENSIONS)}) in the folder")
     if not fps > 0:
-        raise ValueError(f"fps must be positive, got {fps}")
+        raise VslamError(f"fps must be positive, got {fps}")
     return Sequence(timestamps=np.arange(len(names)) / fps, images=FileImages(root, names),
                     camera=_camera_for(root, camera, None), root=root, name=root.name, format="folder")
 

@@ -18,11 +18,17 @@ import cv2
 import numpy as np
 import yaml
 
-from odometry.atomic_io import atomic_write_text
-from odometry.camera import CameraModel
-from odometry.poses import TumFormatError, format_tum, read_tum
-from vslam.errors import (CalibrationError, EmptySequenceError, ImageReadError, MissingFileError, SequenceError,
-                          TimestampOrderError)
+from odometry.shared.atomic_io import atomic_write_text
+from odometry.shared.camera import CameraModel
+from odometry.shared.tum import TumFormatError, format_tum, read_tum
+from vslam.errors import (
+    CalibrationError,
+    EmptySequenceError,
+    ImageReadError,
+    MissingFileError,
+    SequenceError,
+    TimestampOrderError,
+)
 from vslam.io.csvstreams import format_csv, read_csv_columns
 from vslam.sequence import FileImages, GyroStream, Sequence, Trajectory, WheelOdometry
 

@@ -37,7 +37,7 @@ class KeyframePolicy:
 
     def __post_init__(self) -> None:
         if self.distance <= 0 or self.angle_deg <= 0 or self.max_frames < 1:
-            raise ValueError("keyframes.distance, angle_deg and max_frames must be positive")
+            raise ConfigError("keyframes.distance, angle_deg and max_frames must be positive")
 
 
 @dataclass(frozen=True)
@@ -58,9 +58,9 @@ class LoopConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
-            raise ValueError(f"loops.mode must be one of {list(MODES)}, got {self.mode!r}")
+            raise ConfigError(f"loops.mode must be one of {list(MODES)}, got {self.mode!r}")
         if self.exclude_distance is not None and self.exclude_distance < 0:
-            raise ValueError("loops.exclude_distance must be >= 0 metres")
+            raise ConfigError("loops.exclude_distance must be >= 0 metres")
 
 
 @dataclass(frozen=True)

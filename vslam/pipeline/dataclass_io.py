@@ -11,9 +11,7 @@ import types
 import typing
 from typing import Any
 
-
-class ConfigError(ValueError):
-    """A configuration value or key that cannot be used."""
+from odometry.shared.errors import ConfigError
 
 
 def to_dict(obj: Any) -> Any:

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from odometry.camera import CameraModel
 from odometry.rigid import ransac_rigid_2d
+from odometry.shared.camera import CameraModel
 
 
 @dataclass(frozen=True)

@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 
 from graph.formats import write_g2o
-from odometry.atomic_io import atomic_write_text
-from odometry.poses import write_tum
+from odometry.shared.atomic_io import atomic_write_text
+from odometry.shared.tum import write_tum
 from vslam.evaluation.loops import RUN_LOOPS_HEADER
+
 
 def _fmt(v) -> str:
     if v is None:
@@ -60,7 +61,7 @@ def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = T
 
 
 def _evaluate(result, seq) -> dict:
-    from odometry.poses import se2_to_tum, tum_to_se3_matrices
+    from odometry.shared.tum import se2_to_tum, tum_to_se3_matrices
     from vslam.evaluation.loops import LoopTable, loop_precision_recall
     from vslam.evaluation.metrics import evaluate, start_to_end_error
 

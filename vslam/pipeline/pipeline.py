@@ -20,11 +20,12 @@ from loops.cdvs.codec import decode, encode
 from loops.cdvs.database import LoopDatabase
 from loops.cdvs.model import LoopModel
 from loops.cdvs.params import CdvsParams
-from odometry.camera import CameraModel
 from odometry.fusion import fuse_wheel_gyro
-from odometry.pose_cov import compose_with_covariance
-from odometry.poses import between, compose
+from odometry.shared.camera import CameraModel
+from odometry.shared.pose_covariance import compose_with_covariance
+from odometry.shared.poses import between, compose
 from odometry.vo import VisualOdometry, VOEstimate, VOStatus
+from vslam.errors import VslamError
 from vslam.pipeline.backend import IncrementalBuilder, PoseGraphBuilder
 from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import loop_pose
@@ -125,7 +126,7 @@ class Pipeline:
     # ------------------------------------------------------------------ setup
     def reset(self, camera: CameraModel) -> None:
         if camera.camera_height is None:
-            raise ValueError("the SLAM pipeline needs a downward-facing camera: camera.yaml must give camera_height "
+            raise VslamError("the SLAM pipeline needs a downward-facing camera: camera.yaml must give camera_height "
                              "(for loop detection alone on any camera use `vslam loops`)")
         cfg = self.config
         self.camera = camera
@@ -329,7 +330,7 @@ class Pipeline:
         self.reset(seq.require_camera())
         n = len(seq) if max_frames is None else min(len(seq), max_frames)
         if n == 0:
-            raise ValueError(f"{seq.root or seq.name}: the sequence has no frames")
+            raise VslamError(f"{seq.root or seq.name}: the sequence has no frames")
         priors = self._priors(seq, n)
         if self.recorder is not None and seq.groundtruth is not None:
             self.recorder.log_groundtruth(seq.groundtruth_planar()[:n])

@@ -11,8 +11,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from odometry.camera import CameraModel
-from odometry.poses import rot2, to_matrix
+from odometry.shared.camera import CameraModel
+from odometry.shared.poses import rot2, to_matrix
+from odometry.shared.rotations import tilt_matrix
+from vslam.errors import VslamError
 from vslam.sim.floor import Floor
 
 
@@ -41,19 +43,12 @@ class Effects:
         return cls(motion_blur=False, lighting=False, vignetting=False, sensor_noise=False, wobble=False)
 
 
-def _tilt_matrix(roll: float, pitch: float) -> np.ndarray:
-    cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
-    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    return ry @ rx
-
-
 def pixel_to_world_homography(camera: CameraModel, pose: np.ndarray, height: float, tilt: tuple[float, float]
                               ) -> np.ndarray:
     """3x3 H mapping undistorted pixels [u, v, 1] to world floor points (homogeneous), for a camera at `height`
     with `tilt` on a robot at planar `pose`. Same conventions as CameraModel.rays_to_floor."""
     K_inv = np.linalg.inv(camera.K)
-    H_cam = np.diag([1.0, 1.0, 1.0 / height]) @ _tilt_matrix(*tilt) @ K_inv   # -> camera FRD floor point
+    H_cam = np.diag([1.0, 1.0, 1.0 / height]) @ tilt_matrix(*tilt) @ K_inv   # -> camera FRD floor point
     flip = np.diag([1.0, -1.0, 1.0])                                          # FRD (y right) -> base (y left)
     mount = to_matrix(np.asarray(camera.mount))
     return to_matrix(np.asarray(pose, dtype=float)) @ mount @ flip @ H_cam
@@ -62,7 +57,7 @@ def pixel_to_world_homography(camera: CameraModel, pose: np.ndarray, height: flo
 class FrameRenderer:
     def __init__(self, floor: Floor, camera: CameraModel, effects: Effects, seed: int = 0):
         if camera.camera_height is None:
-            raise ValueError("the simulator needs a downward camera (camera_height)")
+            raise VslamError("the simulator needs a downward camera (camera_height)")
         self.floor = floor
         self.camera = camera
         self.effects = effects

@@ -15,8 +15,8 @@ from typing import Callable
 import numpy as np
 import yaml
 
-from odometry.camera import CameraModel
-from odometry.poses import se2_to_tum
+from odometry.shared.camera import CameraModel
+from odometry.shared.tum import se2_to_tum
 from vslam.io.sequence_dir import SequenceWriter
 from vslam.sequence import GyroStream, Trajectory, WheelOdometry
 from vslam.sim.floor import Floor, FloorType

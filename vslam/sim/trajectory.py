@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from odometry.poses import wrap_angle
+from odometry.shared.poses import arc_step, integrate_arcs, wrap_angle
 
 
 class TrajectoryKind(str, enum.Enum):
@@ -37,36 +37,6 @@ class Controls:
         i = np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, len(self.v) - 1)
         dt = times - self.t[i]
         return arc_step(self.poses[i], self.v[i], self.omega[i], dt)
-
-
-def arc_step(pose: np.ndarray, v: np.ndarray, omega: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """Exact unicycle motion over dt with constant v, omega (vectorised)."""
-    pose = np.asarray(pose, dtype=float)
-    th = pose[..., 2]
-    dth = omega * dt
-    small = np.abs(dth) < 1e-9
-    # chord length and direction: exact for an arc, with the straight-line limit
-    safe = np.where(small, 1.0, dth)
-    chord = np.where(small, v * dt, 2 * v / np.where(small, 1.0, omega) * np.sin(safe / 2))
-    ang = th + dth / 2
-    return np.stack([pose[..., 0] + chord * np.cos(ang), pose[..., 1] + chord * np.sin(ang), wrap_angle(th + dth)], -1)
-
-
-def integrate_controls(v: np.ndarray, omega: np.ndarray, dt: np.ndarray | float, start: np.ndarray | None = None
-                       ) -> np.ndarray:
-    """Poses (N + 1, 3) from piecewise-constant controls (N,), exactly (vectorised, no drift from discretisation)."""
-    v = np.asarray(v, dtype=float)
-    omega = np.asarray(omega, dtype=float)
-    dt = np.broadcast_to(np.asarray(dt, dtype=float), v.shape)
-    s = np.zeros(3) if start is None else np.asarray(start, dtype=float)
-    dth = omega * dt
-    th = s[2] + np.concatenate([[0.0], np.cumsum(dth)])
-    small = np.abs(dth) < 1e-9
-    chord = np.where(small, v * dt, 2 * v / np.where(small, 1.0, omega) * np.sin(np.where(small, 1.0, dth) / 2))
-    ang = th[:-1] + dth / 2
-    xy = s[:2] + np.concatenate([np.zeros((1, 2)), np.cumsum(np.column_stack([chord * np.cos(ang),
-                                                                             chord * np.sin(ang)]), axis=0)])
-    return np.column_stack([xy, wrap_angle(th)])
 
 
 # ---------------------------------------------------------------------------------------------------- paths
@@ -197,4 +167,4 @@ def drive(kappa: np.ndarray, ds: float, speed: float, rate: float, accel: float 
         w_out.append(0.0)
     v_arr, w_arr = np.asarray(v_out), np.asarray(w_out)
     times = np.arange(len(v_arr) + 1) * dt
-    return Controls(t=times, v=v_arr, omega=w_arr, poses=integrate_controls(v_arr, w_arr, dt))
+    return Controls(t=times, v=v_arr, omega=w_arr, poses=integrate_arcs(v_arr, w_arr, dt))

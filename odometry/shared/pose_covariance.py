@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from odometry.poses import between, compose
+from odometry.shared.poses import between, compose
 
 
 def compose_jacobians(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

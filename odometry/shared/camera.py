@@ -16,18 +16,11 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from odometry.poses import rot2
+from odometry.shared.poses import rot2
+from odometry.shared.rotations import tilt_matrix
 
 # Newton iterations for undistortion: OpenCV's default of 5 leaves ~0.1 px error with strong distortion.
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-12)
-
-
-def tilt_matrix(roll: float, pitch: float) -> np.ndarray:
-    """Rotation of the viewing rays for a camera tilted by roll (about its x axis) then pitch (about its y axis)."""
-    cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
-    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    return ry @ rx
 
 
 @dataclass(frozen=True)

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from odometry.camera import CameraModel
-from odometry.poses import rot2
+from odometry.shared.camera import CameraModel
+from odometry.shared.poses import rot2
 
 DEFAULT_OVERLAP_THRESHOLD = 0.33
 

@@ -1,0 +1,130 @@
+"""The layering the design fixes, checked on the source (every import, including those inside functions).
+
+odometry.shared <- odometry <- loops, graph (which see only odometry.shared) <- vslam; no cycles between modules.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("odometry", "loops", "graph", "vslam")
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(f): f for p in PACKAGES for f in sorted((ROOT / p).rglob("*.py"))}
+
+
+MODULES = _modules()
+
+
+def _imports(name: str, path: Path) -> list[tuple[str, str, int]]:
+    """(imported module, imported name or '', line) for every import statement of a module."""
+    out = []
+    is_package = path.name == "__init__.py"
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out += [(a.name, "", node.lineno) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = name.split(".") if is_package else name.split(".")[:-1]
+                base = base[: len(base) - (node.level - 1)]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            out += [(module, a.name, node.lineno) for a in node.names]
+    return out
+
+
+def _target(module: str, imported: str) -> str | None:
+    """The project module an import statement loads (a submodule when `from pkg import submodule`)."""
+    if imported and f"{module}.{imported}" in MODULES:
+        return f"{module}.{imported}"
+    while module and module not in MODULES:
+        module = module.rpartition(".")[0]
+    return module or None
+
+
+def _edges() -> dict[str, set[str]]:
+    edges: dict[str, set[str]] = {m: set() for m in MODULES}
+    for name, path in MODULES.items():
+        for module, imported, _ in _imports(name, path):
+            t = _target(module, imported)
+            if t is not None and t != name:
+                edges[name].add(t)
+    return edges
+
+
+def _violations(select, forbid) -> list[str]:
+    bad = []
+    for name, path in MODULES.items():
+        if not select(name):
+            continue
+        for module, imported, line in _imports(name, path):
+            if module.split(".")[0] in PACKAGES and forbid(name, module):
+                bad.append(f"{path.relative_to(ROOT)}:{line}: imports {module}")
+    return bad
+
+
+def test_foundation_packages_never_import_vslam():
+    assert _violations(lambda m: not m.startswith("vslam"), lambda m, t: t.split(".")[0] == "vslam") == []
+
+
+def test_shared_primitives_import_nothing_above_them():
+    assert _violations(lambda m: m.startswith("odometry.shared"),
+                       lambda m, t: not t.startswith("odometry.shared")) == []
+
+
+@pytest.mark.parametrize("package", ["loops", "graph"])
+def test_loops_and_graph_see_only_the_shared_layer_of_odometry(package):
+    assert _violations(lambda m: m.split(".")[0] == package,
+                       lambda m, t: t.split(".")[0] == "odometry" and not t.startswith("odometry.shared")) == []
+
+
+def test_no_import_cycle_between_modules():
+    edges = _edges()
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles: list[list[str]] = []
+
+    def visit(v: str) -> None:   # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(edges[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    assert cycles == []
+
+
+def test_the_checks_see_function_local_imports(tmp_path):
+    src = "def f():\n    from vslam.paths import shared_data_dir\n    return shared_data_dir\n"
+    path = tmp_path / "probe.py"
+    path.write_text(src)
+    assert _imports("loops.probe", path) == [("vslam.paths", "shared_data_dir", 2)]
