@@ -4,7 +4,7 @@ A configuration class is a frozen dataclass that inherits `Config`:
 
     @dataclass(frozen=True)
     class DatabaseParams(Config):
-        PRESETS: ClassVar[dict] = {"strict": {"confirmations": 2}}
+        PRESETS = {"strict": {"confirmations": 2}}   # no annotation: a class attribute, not a field
 
         shortlist: int = setting(5, range="[1, inf)", doc="candidates verified by local matching")
         min_overlap: float | None = setting(None, range="[0, 1]", doc="...")
@@ -14,7 +14,8 @@ and gets, with no code of its own:
 - construction that converts and checks every field (`__post_init__`): strings become enums, lists tuples, integral
   floats ints, "1e-5" a float; a wrong type, a value outside the field's `range`, a value not in its `choices` or NaN
   is a `ConfigError`. Infinity is accepted only where the range includes it (`[0, inf]`). Rules that involve
-  several fields go in an optional `check(self)` method that raises `ConfigError` naming the keys.
+  several fields go in an optional `check(self)` method that raises `ConfigError` naming the keys (a subclass
+  does not define `__post_init__`).
 - `Cls.from_dict(mapping, source=..., base=...)`: nested mappings become nested configs, unknown keys are errors
   (with a suggestion), missing keys keep the value of `base` (default: the class defaults).
 - `Cls.load(path)`: a YAML (.yaml/.yml), TOML (.toml) or JSON (.json) file.
@@ -24,7 +25,7 @@ and gets, with no code of its own:
 - `Cls.preset(name, **changes)`: `PRESETS` maps a name to the changes it makes to the defaults.
 - `obj.with_overrides(["loops.mode=5", "graph.robust=huber"])`: command-line style dotted assignments, each value
   read as a YAML scalar (`5`, `1e-5`, `true`, `null`, `[8, 6]`, `huber`).
-- `Cls.describe()`: a plain-text table of every key with its type, default, range, unit and doc.
+- `Cls.describe()`: a plain-text table of every dotted key with its default, range or choices, unit and doc.
 
 Tunables are documented where they are declared, with `setting(default, range=..., unit=..., doc=...)`: the
 range is an interval written as text ("[1, inf)", "(0, 1]", "(0.5, 1)") or a (low, high) pair, closed, None for
@@ -160,6 +161,8 @@ class _InvalidConfig(ConfigError):
 
 
 def _join(where: str, key: str) -> str:
+    if not key:
+        return where
     return f"{where}.{key}" if where else str(key)
 
 
@@ -209,6 +212,8 @@ def _convert(tp: Any, value: Any, where: str, base: Any = None) -> Any:
         except ValueError:
             raise _Problem(where, f"{value!r} is not one of {', '.join(str(m.value) for m in tp)}") from None
     if origin in (tuple, list):
+        if isinstance(value, np.ndarray) and value.ndim == 1:
+            value = value.tolist()
         if not isinstance(value, (list, tuple)):
             raise _Problem(where, f"expected a list, got {value!r}")
         if origin is tuple and args and args[-1] is not Ellipsis:
@@ -249,16 +254,16 @@ def _convert(tp: Any, value: Any, where: str, base: Any = None) -> Any:
     return value
 
 
-def _numbers_in(value: Any) -> Iterable[tuple[str, float]]:
+def _numbers_in(value: Any) -> Iterable[tuple[str, float, Any]]:
     """The numbers a range applies to: the value itself, or each element of a tuple/list (suffix '[i]')."""
     if isinstance(value, bool):
         return
     if isinstance(value, numbers.Real):
-        yield "", float(value)
+        yield "", float(value), value
     elif isinstance(value, (tuple, list)):
         for i, v in enumerate(value):
             if isinstance(v, numbers.Real) and not isinstance(v, bool):
-                yield f"[{i}]", float(v)
+                yield f"[{i}]", float(v), v
 
 
 def _check_value(f: dataclasses.Field, value: Any) -> None:
@@ -269,9 +274,9 @@ def _check_value(f: dataclasses.Field, value: Any) -> None:
     if choices is not None and value not in choices:
         raise _Problem("", f"{f.name} must be one of {', '.join(map(str, choices))}, got {value!r}")
     interval = f.metadata.get("range", ANY_FINITE)
-    for suffix, v in _numbers_in(value):
-        if v not in interval:
-            raise _Problem("", f"{f.name}{suffix} must be {interval.rule()}, got {v if suffix else value!r}")
+    for suffix, number, given in _numbers_in(value):
+        if number not in interval:
+            raise _Problem("", f"{f.name}{suffix} must be {interval.rule()}, got {given!r}")
 
 
 def _build(cls: type, data: Mapping, where: str, base: Any = None) -> Any:
