@@ -184,17 +184,7 @@ def _convert(tp: Any, value: Any, where: str, base: Any = None) -> Any:
     if tp is Any:
         return value
     if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        problems = []
-        for a in args:
-            if a is type(None):
-                continue
-            try:
-                return _convert(a, value, where, base if isinstance(a, type) and isinstance(base, a) else None)
-            except _Problem as p:
-                problems.append(p)
-        raise problems[0] if problems else _Problem(where, f"bad value {value!r}")
+        return _convert_union(args, value, where, base)
     if origin is typing.Literal:
         for a in args:
             if value == a and type(value) is type(a):
@@ -212,46 +202,75 @@ def _convert(tp: Any, value: Any, where: str, base: Any = None) -> Any:
         except ValueError:
             raise _Problem(where, f"{value!r} is not one of {', '.join(str(m.value) for m in tp)}") from None
     if origin in (tuple, list):
-        if isinstance(value, np.ndarray) and value.ndim == 1:
-            value = value.tolist()
-        if not isinstance(value, (list, tuple)):
-            raise _Problem(where, f"expected a list, got {value!r}")
-        if origin is tuple and args and args[-1] is not Ellipsis:
-            if len(value) != len(args):
-                raise _Problem(where, f"expected {len(args)} values, got {len(value)}")
-            return tuple(_convert(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
-        inner = args[0] if args else Any
-        seq = [_convert(inner, v, f"{where}[{i}]") for i, v in enumerate(value)]
-        return tuple(seq) if origin is tuple else seq
+        return _convert_sequence(origin, args, value, where)
     if origin is dict or tp is dict:
         if not isinstance(value, Mapping):
             raise _Problem(where, f"expected a mapping, got {value!r}")
         return dict(value)
-    if tp is bool:
-        if not isinstance(value, (bool, np.bool_)):
-            raise _Problem(where, f"expected true or false, got {value!r}")
-        return bool(value)
-    if tp is int:
-        if isinstance(value, (bool, np.bool_)):
-            raise _Problem(where, f"expected an integer, got {value!r}")
-        if isinstance(value, numbers.Integral):
-            return int(value)
-        if isinstance(value, float) and value.is_integer():
-            return int(value)
-        raise _Problem(where, f"expected an integer, got {value!r}")
-    if tp is float:
-        if isinstance(value, (bool, np.bool_)):
-            raise _Problem(where, f"expected a number, got {value!r}")
-        if isinstance(value, numbers.Real):
-            return float(value)
-        if isinstance(value, str) and _FLOAT_TEXT.fullmatch(value.strip()):
-            return float(value)
-        raise _Problem(where, f"expected a number, got {value!r}")
-    if tp is str:
-        if not isinstance(value, str):
-            raise _Problem(where, f"expected a string, got {value!r}")
-        return value
+    if tp in _SCALARS:
+        return _SCALARS[tp](value, where)
     return value
+
+
+def _convert_union(args: tuple, value: Any, where: str, base: Any) -> Any:
+    """The first arm of `X | Y | None` that accepts the value (the first arm's complaint otherwise)."""
+    if value is None and type(None) in args:
+        return None
+    problems = []
+    for a in args:
+        if a is type(None):
+            continue
+        try:
+            return _convert(a, value, where, base if isinstance(a, type) and isinstance(base, a) else None)
+        except _Problem as p:
+            problems.append(p)
+    raise problems[0] if problems else _Problem(where, f"bad value {value!r}")
+
+
+def _convert_sequence(origin: type, args: tuple, value: Any, where: str) -> tuple | list:
+    """tuple[int, int] (fixed length), tuple[float, ...] and list[X]; a 1-D numpy array counts as a list."""
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        value = value.tolist()
+    if not isinstance(value, (list, tuple)):
+        raise _Problem(where, f"expected a list, got {value!r}")
+    if origin is tuple and args and args[-1] is not Ellipsis:
+        if len(value) != len(args):
+            raise _Problem(where, f"expected {len(args)} values, got {len(value)}")
+        return tuple(_convert(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+    inner = args[0] if args else Any
+    seq = [_convert(inner, v, f"{where}[{i}]") for i, v in enumerate(value)]
+    return tuple(seq) if origin is tuple else seq
+
+
+def _to_bool(value: Any, where: str) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise _Problem(where, f"expected true or false, got {value!r}")
+    return bool(value)
+
+
+def _to_int(value: Any, where: str) -> int:
+    if isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)):
+        return int(value)
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    raise _Problem(where, f"expected an integer, got {value!r}")
+
+
+def _to_float(value: Any, where: str) -> float:
+    if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
+        return float(value)
+    if isinstance(value, str) and _FLOAT_TEXT.fullmatch(value.strip()):
+        return float(value)
+    raise _Problem(where, f"expected a number, got {value!r}")
+
+
+def _to_str(value: Any, where: str) -> str:
+    if not isinstance(value, str):
+        raise _Problem(where, f"expected a string, got {value!r}")
+    return value
+
+
+_SCALARS = {bool: _to_bool, int: _to_int, float: _to_float, str: _to_str}
 
 
 def _numbers_in(value: Any) -> Iterable[tuple[str, float, Any]]:
