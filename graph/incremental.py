@@ -56,7 +56,7 @@ class IncrementalPoseGraph:
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {dim}")
         self.dim = dim
-        self.params = params or GraphParams.default()
+        self.params = params or GraphParams()
         self._factorization = self.params.isam2_factorization
         self._isam = gtsam.ISAM2(_isam_params(self.params, self._factorization))
         self._trusted: list = []                      # prior and odometry factors handed to iSAM2 (for a rebuild)
@@ -480,7 +480,7 @@ class IncrementalPoseGraph:
             return self.loop_inliers()
         t0 = time.perf_counter()
         cand = self.loop_inliers()
-        res = solve(self.to_data(), self.params.with_(solver=Solver.LM, init=InitMethod.GIVEN), candidates=cand)
+        res = solve(self.to_data(), self.params.replace(solver=Solver.LM, init=InitMethod.GIVEN), candidates=cand)
         remove, add = [], []
         for s, ok in enumerate(res.loop_inlier.tolist()):
             in_isam = self._loop_slot[s] >= 0
@@ -519,7 +519,7 @@ class IncrementalPoseGraph:
             self.updates += self.params.isam2_final_steps
             self._estimate = None
         data = self.to_data()
-        built = build(data, self.params.with_(solver=Solver.LM))
+        built = build(data, self.params.replace(solver=Solver.LM))
         values = values_from_array(self.dim, data.poses)
         r2 = squared_residuals(built.loops, values)
         c2 = np.asarray(self._loop_c2)
@@ -584,7 +584,7 @@ def _loop_order(data: PoseGraphData, order: np.ndarray) -> np.ndarray:
 def gate_pass(data: PoseGraphData, params: GraphParams) -> tuple[np.ndarray, np.ndarray]:
     """Replay the graph through the gated iSAM2 pass: (estimate (N, w) in node order, admitted flag per loop in
     data order)."""
-    inc, order = _replay(data, params.with_(gate_loops=True, isam2_batch_nodes=params.gate_batch_nodes))
+    inc, order = _replay(data, params.replace(gate_loops=True, isam2_batch_nodes=params.gate_batch_nodes))
     _, est = inc.estimate()
     admitted = np.zeros(data.num_loops, bool)
     admitted[_loop_order(data, order)] = inc.loop_inliers()

@@ -20,7 +20,7 @@ def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: 
              robust: RobustMode | str | None = None, init: InitMethod | str | None = None) -> GraphResult:
     """Optimise a pose graph; keyword arguments override the corresponding `params` fields."""
     over = {k: v for k, v in (("solver", solver), ("robust", robust), ("init", init)) if v is not None}
-    params = (params or GraphParams.default()).with_(**over)
+    params = (params or GraphParams()).replace(**over)
     if data.num_nodes == 0:
         raise GraphError("the pose graph has no nodes")
     if params.solver == Solver.ISAM2:
@@ -37,7 +37,7 @@ def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: 
         gate_seconds = time.perf_counter() - t0
         seeded = data.copy()
         seeded.poses = estimate
-        res = solve(seeded, params.with_(init=InitMethod.GIVEN), candidates=admitted)
+        res = solve(seeded, params.replace(init=InitMethod.GIVEN), candidates=admitted)
         res.seconds += gate_seconds
         res.init_seconds += gate_seconds
         res.init = f"gated iSAM2 pass ({int(admitted.sum())} of {len(admitted)} loops admitted)"

@@ -26,7 +26,7 @@ class PoseGraph:
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {dim}")
         self.dim = dim
-        self.params = params or GraphParams.default()
+        self.params = params or GraphParams()
         self._ids: list[int] = []
         self._index: dict[int, int] = {}
         self._guess: list[np.ndarray] = []

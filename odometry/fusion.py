@@ -36,13 +36,13 @@ are tight even when the absolute poses have drifted: that is what seed 001's loo
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
 
 from odometry.errors import OdometryError
-from odometry.shared.errors import ConfigError
+from odometry.shared.config import Config, setting
 from odometry.shared.pose_covariance import between_jacobians
 from odometry.shared.poses import arc_chord, between, wrap_angle
 
@@ -57,7 +57,7 @@ class Interpolation(str, Enum):
 
 
 @dataclass(frozen=True)
-class FusionConfig:
+class FusionConfig(Config):
     """Noise model of the wheel/gyro fusion. Per-sample standard deviations unless stated otherwise.
 
     Attributes:
@@ -82,76 +82,35 @@ class FusionConfig:
         gap_rate_sigma: yaw-rate uncertainty (rad/s) over intervals with no rate sensor at all.
     """
 
-    wheel_v_sigma: float = 0.02
-    wheel_omega_sigma: float = 0.03
-    gyro_sigma: float = 0.005
-    slip_forward: float = 0.01
-    slip_lateral: float = 0.005
-    slip_heading: float = 0.01
-    gyro_bias_sigma0: float = 0.02
-    gyro_bias0: float = 0.0
-    gyro_bias_walk: float = 2e-4
-    wheel_scale_sigma0: float = 0.05
-    wheel_scale_walk: float = 1e-3
-    speed_scale_sigma0: float = 0.02
+    LABEL = "fusion"
+    PRESETS = {
+        # a differential-drive indoor robot with wheel encoders and a consumer MEMS gyro
+        "default": {},
+        # good encoders on a hard floor and a stable (e.g. fibre-optic or calibrated MEMS) gyro
+        "precise": {"wheel_v_sigma": 0.005, "wheel_omega_sigma": 0.01, "gyro_sigma": 0.001, "slip_forward": 0.003,
+                    "slip_lateral": 0.001, "slip_heading": 0.003, "gyro_bias_sigma0": 0.005, "gyro_bias_walk": 1e-5},
+        # carpet, grass or wet floors: large wheel slip, trust the gyro for heading
+        "slippery": {"wheel_v_sigma": 0.03, "wheel_omega_sigma": 0.08, "slip_forward": 0.03, "slip_lateral": 0.015,
+                     "slip_heading": 0.05},
+    }
+
+    wheel_v_sigma: float = setting(0.02, range="[0, inf)", unit="m/s")
+    wheel_omega_sigma: float = setting(0.03, range="[0, inf)", unit="rad/s")
+    gyro_sigma: float = setting(0.005, range="[0, inf)", unit="rad/s")
+    slip_forward: float = setting(0.01, range="[0, inf)", unit="m/sqrt(m)")
+    slip_lateral: float = setting(0.005, range="[0, inf)", unit="m/sqrt(m)")
+    slip_heading: float = setting(0.01, range="[0, inf)", unit="rad/sqrt(m)")
+    gyro_bias_sigma0: float = setting(0.02, range="[0, inf)", unit="rad/s")
+    gyro_bias0: float = setting(0.0, unit="rad/s")
+    gyro_bias_walk: float = setting(2e-4, range="[0, inf)", unit="rad/s/sqrt(s)")
+    wheel_scale_sigma0: float = setting(0.05, range="[0, inf)")
+    wheel_scale_walk: float = setting(1e-3, range="[0, inf)", unit="1/sqrt(m)")
+    speed_scale_sigma0: float = setting(0.02, range="[0, inf)")
     interpolation: Interpolation = Interpolation.HOLD
-    bias_gate: float = 10.83  # chi2(1) at 99.9 %
-    max_gap: float = 0.5
-    gap_speed_sigma: float = 0.5
-    gap_rate_sigma: float = 0.5
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "interpolation", Interpolation(self.interpolation))
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "interpolation":
-                continue
-            if not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ConfigError(f"FusionConfig.{f.name} must be a finite number, got {v!r}")
-            if f.name != "gyro_bias0" and v < 0:
-                raise ConfigError(f"FusionConfig.{f.name} must be >= 0, got {v}")
-        if self.max_gap <= 0:
-            raise ConfigError(f"FusionConfig.max_gap must be > 0, got {self.max_gap}")
-
-    # ------------------------------------------------------------------ presets
-    @classmethod
-    def default(cls) -> "FusionConfig":
-        """A differential-drive indoor robot with wheel encoders and a consumer MEMS gyro."""
-        return cls()
-
-    @classmethod
-    def precise(cls) -> "FusionConfig":
-        """Good encoders on a hard floor and a stable (e.g. fibre-optic or calibrated MEMS) gyro."""
-        return cls(wheel_v_sigma=0.005, wheel_omega_sigma=0.01, gyro_sigma=0.001, slip_forward=0.003,
-                   slip_lateral=0.001, slip_heading=0.003, gyro_bias_sigma0=0.005, gyro_bias_walk=1e-5)
-
-    @classmethod
-    def slippery(cls) -> "FusionConfig":
-        """Carpet, grass or wet floors: large wheel slip, trust the gyro for heading."""
-        return cls(wheel_v_sigma=0.03, wheel_omega_sigma=0.08, slip_forward=0.03, slip_lateral=0.015,
-                   slip_heading=0.05)
-
-    @classmethod
-    def preset(cls, name: str) -> "FusionConfig":
-        presets = {"default": cls.default, "precise": cls.precise, "slippery": cls.slippery}
-        if name not in presets:
-            raise ConfigError(f"unknown fusion preset {name!r}; choose one of {', '.join(presets)}")
-        return presets[name]()
-
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d["interpolation"] = self.interpolation.value
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict, base: "FusionConfig | None" = None) -> "FusionConfig":
-        """Override `base` (default preset) with the keys of `d`; unknown keys raise a ValueError naming them."""
-        names = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise ConfigError(f"unknown FusionConfig field(s): {', '.join(unknown)}")
-        return replace(base or cls.default(),
-                       **{k: (Interpolation(v) if k == "interpolation" else float(v)) for k, v in d.items()})
+    bias_gate: float = setting(10.83, range="[0, inf)", doc="chi2(1) at 99.9 %")
+    max_gap: float = setting(0.5, range="(0, inf)", unit="s")
+    gap_speed_sigma: float = setting(0.5, range="[0, inf)", unit="m/s")
+    gap_rate_sigma: float = setting(0.5, range="[0, inf)", unit="rad/s")
 
 
 @dataclass
@@ -305,7 +264,7 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
         gyro_t, gyro_z: gyro samples (G,) in rad/s, or both None (wheel-only dead reckoning).
         query_t: (M,) non-decreasing times at which poses are wanted (e.g. camera frames). The first pose is the
             origin; rates outside a stream's time span are held at its end values (and inflated after `max_gap`).
-        config: noise model; FusionConfig.default() if None.
+        config: noise model; FusionConfig() if None.
 
     Returns:
         FusedTrajectory with poses (M, 3), marginal covariances (M, 3, 3), the bias estimate and what
@@ -314,7 +273,7 @@ def fuse_wheel_gyro(wheel_t: np.ndarray | None, v: np.ndarray | None, omega: np.
     Raises:
         ValueError: mismatched lengths, non-finite values, non-increasing timestamps, or no yaw-rate source.
     """
-    cfg = config or FusionConfig.default()
+    cfg = config or FusionConfig()
     if wheel_t is None or v is None:
         raise OdometryError("wheel odometry speed is required (wheel_t and v): no other input observes translation")
     wheel = _stream("wheel", wheel_t, ("wheel v", v), ("wheel omega", omega))

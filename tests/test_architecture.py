@@ -128,3 +128,32 @@ def test_the_checks_see_function_local_imports(tmp_path):
     path = tmp_path / "probe.py"
     path.write_text(src)
     assert _imports("loops.probe", path) == [("vslam.paths", "shared_data_dir", 2)]
+
+
+# One configuration mechanism: every *Params / *Config dataclass is an odometry.shared.config.Config, which alone
+# provides from_dict/to_dict/load/dump/replace/preset; no class keeps a copy or a with_-style helper of its own.
+NOT_CONFIGS = {"TrainedParams"}   # learned arrays read from a .npz file, not tunables
+CONFIG_PLUMBING = {"from_dict", "to_dict", "load", "dump", "dumps", "replace", "preset", "with_overrides"}
+
+
+def _classes():
+    for name, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ClassDef):
+                bases = {b.id if isinstance(b, ast.Name) else getattr(b, "attr", "") for b in node.bases}
+                methods = {n.name for n in node.body if isinstance(n, ast.FunctionDef)}
+                yield f"{path.relative_to(ROOT)}:{node.lineno}", node.name, bases, methods
+
+
+def test_every_params_and_config_class_uses_the_one_config_mechanism():
+    bad = []
+    for where, cls, bases, methods in _classes():
+        if where.startswith("odometry/shared/config.py"):
+            continue
+        if cls.endswith(("Params", "Config")) and cls not in NOT_CONFIGS and "Config" not in bases:
+            bad.append(f"{where}: {cls} does not inherit odometry.shared.config.Config")
+        if "Config" in bases and methods & CONFIG_PLUMBING:
+            bad.append(f"{where}: {cls} defines its own {', '.join(sorted(methods & CONFIG_PLUMBING))}")
+        if methods & {"with_", "with_height"}:
+            bad.append(f"{where}: {cls} has a with_-style copy helper (use replace)")
+    assert bad == []

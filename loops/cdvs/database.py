@@ -17,19 +17,23 @@ from loops.cdvs.global_desc import absent_marks, global_scores_many, weight_lut
 from loops.cdvs.match import IncompatibleDescriptorsError, MatchResult, match
 from loops.cdvs.params import CdvsParams
 from loops.cdvs.trained import TrainedParams, load_trained
+from odometry.shared.config import Config, setting
 
 _CHUNK = 16384  # rows per vectorised block of the global scan: bounds the temporary memory
 
 
 @dataclass(frozen=True)
-class DatabaseParams:
-    shortlist: int = 5             # candidates (best global scores) verified by local matching
-    exclude_recent: int = 20       # the most recently added keyframes are never candidates
-    min_global: float = -1.0       # candidates below this global score are not verified
-    confirmations: int = 1         # consecutive query keyframes that must agree before a loop is accepted
-    confirm_window: int = 5        # "agree": a verified match within this many stored keyframes of the last one
-    min_overlap: float | None = None  # accept only if the verified transform implies at least this image overlap;
-                                      # None: the model's min_overlap (0 without a model)
+class DatabaseParams(Config):
+    shortlist: int = setting(5, range="[1, inf)", doc="candidates (best global scores) verified by local matching")
+    exclude_recent: int = setting(20, range="[0, inf)",
+                                  doc="the most recently added keyframes are never candidates")
+    min_global: float = setting(-1.0, doc="candidates below this global score are not verified")
+    confirmations: int = setting(1, range="[1, inf)",
+                                 doc="consecutive query keyframes that must agree before a loop is accepted")
+    confirm_window: int = setting(5, range="[0, inf)",
+                                  doc='"agree": a verified match within this many stored keyframes of the last one')
+    min_overlap: float | None = setting(None, range="[0, 1]")   # accept only if the verified transform implies at
+    #                                     least this image overlap; None: the model's min_overlap (0 without a model)
 
 
 @dataclass(frozen=True)

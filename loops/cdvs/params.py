@@ -6,9 +6,9 @@ features, the bits kept per local descriptor and the size of the global descript
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
-from odometry.shared.errors import ConfigError
+from odometry.shared.config import Config, ConfigError, setting
 
 MODES = (1, 2, 3, 4, 5, 6)
 BUDGETS = {1: 512, 2: 1024, 3: 2048, 4: 4096, 5: 8192, 6: 16384}
@@ -22,54 +22,78 @@ class GeometryModel(enum.Enum):
 
 
 @dataclass(frozen=True)
-class ExtractionParams:
+class ExtractionParams(Config):
     """How an image becomes keypoints and descriptors (shared by all modes; only budgets differ per mode)."""
 
-    max_side: int = 640            # images are resized so that max(w, h) <= max_side (as the CDVS reference)
-    n_detect: int = 1000           # ORB/FAST keypoints detected on the pyramid before selection
-    n_levels: int = 8              # pyramid levels (8 x 1.3: scale changes up to ~6x between photographs)
-    scale_factor: float = 1.3      # pyramid scale step
-    fast_threshold: int = 12       # FAST intensity threshold (low: floors such as tiles are low-contrast)
-    dense_threshold: int = 30      # used instead when the image has more than dense_corners FAST corners
-    dense_corners: int = 5000      # (carpet-like textures: ORB would spend its time scoring 10k+ corners)
+    max_side: int = setting(640, range="[1, inf)", unit="px",
+                            doc="images are resized so that max(w, h) <= max_side (as the CDVS reference)")
+    n_detect: int = setting(1000, range="[1, inf)", doc="ORB/FAST keypoints detected on the pyramid before selection")
+    n_levels: int = setting(8, range="[1, inf)",
+                            doc="pyramid levels (8 x 1.3: scale changes up to ~6x between photographs)")
+    scale_factor: float = setting(1.3, range="(1, inf)", doc="pyramid scale step")
+    fast_threshold: int = setting(12, range="[0, 255]",
+                                  doc="FAST intensity threshold (low: floors such as tiles are low-contrast)")
+    dense_threshold: int = setting(30, range="[0, 255]",
+                                   doc="used instead when the image has more than dense_corners FAST corners")
+    dense_corners: int = setting(5000, range="[0, inf)",
+                                 doc="(carpet-like textures: ORB would spend its time scoring 10k+ corners)")
     centre_prior: bool = True      # relevance prefers the image centre (photographs); off for floors
-    n_described: int = 600         # keypoints (by relevance) that get an ORB descriptor; feed the global descriptor
+    n_described: int = setting(600, range="[1, inf)",
+                               doc="keypoints (by relevance) that get an ORB descriptor; feed the global descriptor")
 
 
 @dataclass(frozen=True)
-class ModeParams:
+class ModeParams(Config):
     """Per-mode budget split."""
 
-    mode: int
-    budget: int                    # hard limit on the serialised size in bytes
-    desc_bits: int                 # bits kept per local descriptor (trained priority order), multiple of 8
-    max_local: int                 # upper bound on local features (also bounds matching time)
-    global_clusters: int           # at most this many codebook clusters are sent in the global descriptor
-    coord_block: int               # coordinate quantisation block in processed-image pixels
+    mode: int = setting(choices=MODES)
+    budget: int = setting(range="[1, inf)", unit="bytes", doc="hard limit on the serialised size")
+    desc_bits: int = setting(range="[8, 256]",
+                             doc="bits kept per local descriptor (trained priority order), multiple of 8")
+    max_local: int = setting(range="[1, inf)", doc="upper bound on local features (also bounds matching time)")
+    global_clusters: int = setting(range="[1, inf)",
+                                   doc="at most this many codebook clusters are sent in the global descriptor")
+    coord_block: int = setting(range="[1, inf)", unit="px",
+                               doc="coordinate quantisation block in processed-image pixels")
+
+    def check(self) -> None:
+        if self.desc_bits % 8:
+            raise ConfigError(f"desc_bits must be a multiple of 8, got {self.desc_bits}")
 
 
 @dataclass(frozen=True)
-class MatchParams:
+class MatchParams(Config):
     """Local matching, geometric check and decision."""
 
-    ratio: float = 0.90            # Lowe ratio on Hamming distances (d1 <= ratio * d2)
-    max_distance_frac: float = 0.30  # reject nearest neighbours farther than this fraction of the bits
-    min_matches: int = 5           # below this, no geometric check (local score 0)
-    max_geometry_matches: int = 64  # DISTRAT + RANSAC see at most this many best-weighted matches (cost ~ K^2)
-    distrat_chi2: float = 29.5435  # chi-square(24 dof) 80th percentile: below it the LDR histogram looks like outliers
-    ransac_iterations: int = 24    # "a few RANSAC iterations" after DISTRAT (deterministic, seeded)
-    ransac_threshold_frac: float = 0.01  # inlier threshold as a fraction of the processed image diagonal (8 px)
+    ratio: float = setting(0.90, range="(0, 1]", doc="Lowe ratio on Hamming distances (d1 <= ratio * d2)")
+    max_distance_frac: float = setting(0.30, range="(0, 1]",
+                                       doc="reject nearest neighbours farther than this fraction of the bits")
+    min_matches: int = setting(5, range="[0, inf)", doc="below this, no geometric check (local score 0)")
+    max_geometry_matches: int = setting(64, range="[1, inf)",
+                                        doc="DISTRAT + RANSAC see at most this many best-weighted matches (cost ~ K^2)")
+    distrat_chi2: float = setting(29.5435, range="[0, inf)",
+                                  doc="chi-square(24 dof) 80th percentile: below it the LDR histogram looks like "
+                                      "outliers")
+    ransac_iterations: int = setting(24, range="[1, inf)",
+                                     doc='"a few RANSAC iterations" after DISTRAT (deterministic, seeded)')
+    ransac_threshold_frac: float = setting(0.01, range="(0, inf)",
+                                           doc="inlier threshold as a fraction of the processed image diagonal (8 px)")
     geometry: GeometryModel = GeometryModel.AFFINE
-    min_inliers: int = 4           # fewer final inliers -> local score 0
+    min_inliers: int = setting(4, range="[0, inf)", doc="fewer final inliers -> local score 0")
     # plausible transforms only (random matches fit arbitrary ones): overall scale range and, for the affine model,
     # largest singular-value ratio; mirrored transforms are always rejected. Photographs: scale changes up to 6x.
-    scale_range: tuple[float, float] = (1.0 / 6.0, 6.0)
-    max_anisotropy: float = 4.0
+    scale_range: tuple[float, float] = setting((1.0 / 6.0, 6.0), range="(0, inf)")
+    max_anisotropy: float = setting(4.0, range="[1, inf)")
+
+    def check(self) -> None:
+        if self.scale_range[0] > self.scale_range[1]:
+            raise ConfigError(f"scale_range must be (low, high) with low <= high, got {list(self.scale_range)}")
 
 
 @dataclass(frozen=True)
-class CdvsParams:
-    """Everything tunable about encoding and matching for one mode. Use `CdvsParams.for_mode(m)`."""
+class CdvsParams(Config):
+    """Everything tunable about encoding and matching for one mode. Build it with `CdvsParams.for_mode(m)` (the
+    per-mode table) or `CdvsParams.floor(m)` (the same for a downward camera over a planar floor)."""
 
     mode: ModeParams
     extraction: ExtractionParams = ExtractionParams()
@@ -80,17 +104,15 @@ class CdvsParams:
         if mode not in MODE_PRESETS:
             raise ConfigError(f"mode must be one of {MODES}, got {mode!r}")
         p = CdvsParams(mode=MODE_PRESETS[mode])
-        return replace(p, **overrides) if overrides else p
+        return p.replace(**overrides) if overrides else p
 
     @staticmethod
     def floor(mode: int) -> "CdvsParams":
         """Preset for a downward camera over a planar floor: the image motion is a rotation + translation at a
         constant scale (the camera height does not change), so the similarity check only accepts scales near 1."""
-        p = CdvsParams.for_mode(mode)
-        return replace(p, mode=replace(p.mode, global_clusters=FLOOR_GLOBAL_CLUSTERS[mode]),
-                       extraction=replace(p.extraction, centre_prior=False),
-                       matching=replace(p.matching, geometry=GeometryModel.SIMILARITY, scale_range=(0.8, 1.25),
-                                        ransac_threshold_frac=0.02))
+        return CdvsParams.for_mode(mode).replace(
+            mode={"global_clusters": FLOOR_GLOBAL_CLUSTERS[mode]}, extraction={"centre_prior": False},
+            matching={"geometry": GeometryModel.SIMILARITY, "scale_range": (0.8, 1.25), "ransac_threshold_frac": 0.02})
 
 
 # The per-mode table. Like the CDVS reference, the budget goes to many features with short descriptors rather than

@@ -8,11 +8,10 @@ unstated; ours are documented next to each field and were checked on the KITTI b
 """
 from __future__ import annotations
 
-import dataclasses
 import enum
 from dataclasses import dataclass
 
-from odometry.shared.errors import ConfigError
+from odometry.shared.config import Config, setting
 
 
 class SampleMode(str, enum.Enum):
@@ -24,91 +23,60 @@ class SampleMode(str, enum.Enum):
 
 
 @dataclass(frozen=True)
-class HorizonParams:
+class HorizonParams(Config):
+    LABEL = "horizon"
+    PRESETS = {
+        # The paper's method with our choices for what it leaves unstated.
+        "paper": {},
+        # Two checks the paper does not make: one test feature per stored feature, and inliers whose feature-scale
+        # ratio agrees with the fitted b_s. A little more discriminative (see `vslam bench horizon`).
+        "robust": {"one_to_one": True, "scale_tolerance": 0.75},
+    }
+
     # --- horizon signal (paper §3) ---
-    band_height: int = 30          # rows summed at each sample; centred on the horizon row
-    step: int = 4                  # image columns between samples
+    band_height: int = setting(30, range="[1, inf)", unit="px",
+                               doc="rows summed at each sample; centred on the horizon row")
+    step: int = setting(4, range="[1, inf)", unit="px", doc="image columns between samples")
     sample_mode: SampleMode = SampleMode.COLUMN
 
     # --- detector (paper §3) ---
-    octaves: int = 4
-    intervals: int = 3             # box filters per octave; lobe = 2^(o+1) * (i+1) + 1 samples, as in SURF
-    threshold: float = 1.0         # on |scale-normalised second derivative|, grey levels per band pixel
+    octaves: int = setting(4, range="[1, inf)")
+    intervals: int = setting(3, range="[1, inf)",
+                             doc="box filters per octave; lobe = 2^(o+1) * (i+1) + 1 samples, as in SURF")
+    threshold: float = setting(1.0, range="[0, inf)",
+                               doc="on |scale-normalised second derivative|, grey levels per band pixel")
 
     # --- descriptor: 3 subregions of Haar responses, (sum dx, sum |dx|) each -> 6 numbers, unit length ---
-    subregions: int = 3
-    samples_per_subregion: int = 5  # SURF's 5 samples per subregion, spaced by the feature scale s
-    descriptor_window: float = 15.0  # total support in units of s (SURF: 20 s over 4 subregions)
-    gaussian_sigma: float = 3.3     # Gaussian weighting of the Haar samples, in units of s (as SURF)
+    subregions: int = setting(3, range="[1, inf)")
+    samples_per_subregion: int = setting(5, range="[1, inf)",
+                                         doc="SURF's 5 samples per subregion, spaced by the feature scale s")
+    descriptor_window: float = setting(15.0, range="(0, inf)",
+                                       doc="total support in units of s (SURF: 20 s over 4 subregions)")
+    gaussian_sigma: float = setting(3.3, range="(0, inf)",
+                                    doc="Gaussian weighting of the Haar samples, in units of s (as SURF)")
 
     # --- matching (paper §3.1) ---
-    ratio: float = 0.7             # nearest / second-nearest descriptor distance
+    ratio: float = setting(0.7, range="(0, 1]", doc="nearest / second-nearest descriptor distance")
     match_sign: bool = True        # only bright blobs match bright blobs (SURF's sign-of-Laplacian test)
     one_to_one: bool = False       # a stored feature keeps only its closest test feature (not in the paper)
-    min_distance: float = 0.05     # floor on the distance in the 1/d score so a perfect match cannot dominate
-    ransac_iterations: int = 100   # hypotheses; all pairs are tried when there are fewer
-    ransac_tolerance: float = 8.0  # inlier residual of x_test = b_s * x_stored + b_d, in image pixels
-    ransac_min_inliers: int = 3    # fewer consistent matches give score_ransac = 0 (two points fit any line)
-    max_scale_change: float = 2.0  # b_s must lie in [1/max, max]; b_s <= 0 would reverse the horizon order
-    scale_tolerance: float = 0.0   # > 0: inliers' feature-scale ratio must agree with b_s within this many octaves
-                                   # (not in the paper; 0 disables)
-    seed: int = 0                  # RANSAC sampling seed (results are deterministic for a given seed)
+    min_distance: float = setting(0.05, range="(0, inf)",
+                                  doc="floor on the distance in the 1/d score so a perfect match cannot dominate")
+    ransac_iterations: int = setting(100, range="[1, inf)", doc="hypotheses; all pairs are tried when there are fewer")
+    ransac_tolerance: float = setting(8.0, range="(0, inf)", unit="px",
+                                      doc="inlier residual of x_test = b_s * x_stored + b_d")
+    ransac_min_inliers: int = setting(3, range="[2, inf)",
+                                      doc="fewer consistent matches give score_ransac = 0 (two points fit any line)")
+    max_scale_change: float = setting(2.0, range="[1, inf)",
+                                      doc="b_s must lie in [1/max, max]; b_s <= 0 would reverse the horizon order")
+    scale_tolerance: float = setting(0.0, range="[0, inf)")   # > 0: inliers' feature-scale ratio must agree with
+    #                                                           b_s within this many octaves (not in the paper; 0
+    #                                                           disables)
+    seed: int = setting(0, range="[0, inf)",
+                        doc="RANSAC sampling seed (results are deterministic for a given seed)")
 
     # --- recognition (paper §4: a threshold on the NN+RANSAC score; theirs was 100 in their units) ---
-    recognition_threshold: float = 70.0  # ~5% false positives on the KITTI bank (`vslam bench horizon`)
-
-    def __post_init__(self) -> None:
-        positive_ints = ("band_height", "step", "octaves", "intervals", "subregions", "samples_per_subregion",
-                         "ransac_iterations")
-        for name in positive_ints:
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
-                raise ConfigError(f"HorizonParams.{name} must be a positive integer, got {v!r}")
-        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
-            raise ConfigError(f"HorizonParams.seed must be a non-negative integer, got {self.seed!r}")
-        if not self.scale_tolerance >= 0:
-            raise ConfigError(f"HorizonParams.scale_tolerance must be >= 0, got {self.scale_tolerance!r}")
-        for name in ("descriptor_window", "gaussian_sigma", "min_distance", "ransac_tolerance"):
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"HorizonParams.{name} must be > 0, got {getattr(self, name)!r}")
-        object.__setattr__(self, "sample_mode", SampleMode(self.sample_mode))
-        if not self.threshold >= 0:
-            raise ConfigError(f"HorizonParams.threshold must be >= 0, got {self.threshold!r}")
-        if not 0 < self.ratio <= 1:
-            raise ConfigError(f"HorizonParams.ratio must be in (0, 1], got {self.ratio!r}")
-        if not self.max_scale_change >= 1:
-            raise ConfigError(f"HorizonParams.max_scale_change must be >= 1, got {self.max_scale_change!r}")
-        if self.ransac_min_inliers < 2:
-            raise ConfigError(f"HorizonParams.ransac_min_inliers must be >= 2, got {self.ransac_min_inliers!r}")
-
-    def replace(self, **changes) -> "HorizonParams":
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict:
-        d = dataclasses.asdict(self)
-        d["sample_mode"] = self.sample_mode.value
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "HorizonParams":
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"unknown HorizonParams field(s): {', '.join(unknown)}")
-        return cls(**d)
-
-    @classmethod
-    def preset(cls, name: str) -> "HorizonParams":
-        try:
-            return PRESETS[name]
-        except KeyError:
-            raise ConfigError(f"unknown horizon preset {name!r}; choose from {', '.join(PRESETS)}") from None
+    recognition_threshold: float = setting(70.0, doc="~5% false positives on the KITTI bank (`vslam bench horizon`)")
 
 
-PRESETS: dict[str, HorizonParams] = {
-    # The paper's method with our choices for what it leaves unstated.
-    "paper": HorizonParams(),
-    # Two checks the paper does not make: one test feature per stored feature, and inliers whose feature-scale
-    # ratio agrees with the fitted b_s. A little more discriminative (see `vslam bench horizon`).
-    "robust": HorizonParams(one_to_one=True, scale_tolerance=0.75),
-}
+# The presets by name: the name the package has always exported.
+PRESETS = HorizonParams.PRESETS

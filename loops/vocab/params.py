@@ -6,11 +6,10 @@ words for a key image to be a candidate, the BRIEFROT angle, the BRIEF patch, an
 """
 from __future__ import annotations
 
-import dataclasses
 import enum
 from dataclasses import dataclass
 
-from odometry.shared.errors import ConfigError
+from odometry.shared.config import Config, ConfigError, setting
 
 
 class DescriptorName(str, enum.Enum):
@@ -62,78 +61,52 @@ class Distance(str, enum.Enum):
 
 
 @dataclass(frozen=True)
-class VocabParams:
+class VocabParams(Config):
+    PRESETS = {
+        # the paper's final choice (Sec. 4.3): k = 8, L = 8, chi-square, 500 features, theta = 8 degrees
+        "paper": {"k": 8, "depth": 8},
+        # our default: same method, a shallower tree that builds fast from a few hundred images
+        "default": {},
+        # tiny vocabularies for tests and quick looks
+        "fast": {"k": 6, "depth": 3, "kmeans_iters": 5, "n_features": 200},
+    }
+
     descriptor: DescriptorName = DescriptorName.BRIEF
     # vocabulary tree (Nister-Stewenius): branch factor k, depth L, Lloyd iterations per node, build seed
-    k: int = 10
-    depth: int = 5
-    kmeans_iters: int = 10
-    kmeans_restarts: int = 1               # k-means++ runs per node, the lowest inertia kept (3 measured no steadier)
-    seed: int = 0
-    max_train_descriptors: int = 200_000   # a seeded subsample trains the tree when the memory has more
+    k: int = setting(10, range="[2, inf)", doc="branch factor of the vocabulary tree")
+    depth: int = setting(5, range="[1, inf)", doc="depth L of the vocabulary tree")
+    kmeans_iters: int = setting(10, range="[1, inf)", doc="Lloyd iterations per node")
+    kmeans_restarts: int = setting(1, range="[1, inf)")   # k-means++ runs per node, the lowest inertia kept
+    #                                                       (3 measured no steadier)
+    seed: int = setting(0, range="[0, inf)", doc="tree build seed")
+    max_train_descriptors: int = setting(200_000, range="[2, inf)",
+                                         doc="a seeded subsample trains the tree when the memory has more")
     # database and scoring
     distance: Distance = Distance.CHI2
-    min_shared_words: int = 5
+    min_shared_words: int = setting(5, range="[1, inf)", doc="words a key image must share to be a candidate")
     # keypoint descriptors
-    n_features: int = 500
-    min_image_side: int = 0                # upscale smaller images so their shorter side reaches this (0 = never)
-    brief_patch: int = 48                  # BRIEF patch side in pixels (paper: 48)
-    brief_sigma: float = 2.0               # Gaussian smoothing before the BRIEF tests
-    brief_pattern_seed: int = 1234         # fixed: vocabularies built with one pattern only work with that pattern
-    rot_theta_deg: float = 8.0             # BRIEFROT angle (paper: 8 degrees, found by the Fig. 9 sweep)
+    n_features: int = setting(500, range="[1, inf)", doc="keypoints per image")
+    min_image_side: int = setting(0, range="[0, inf)", unit="px",
+                                  doc="upscale smaller images so their shorter side reaches this (0 = never)")
+    brief_patch: int = setting(48, range="[8, inf)", unit="px", doc="BRIEF patch side (paper: 48)")
+    brief_sigma: float = setting(2.0, range="[0, inf)", unit="px", doc="Gaussian smoothing before the BRIEF tests")
+    brief_pattern_seed: int = setting(1234, range="[0, inf)")   # fixed: vocabularies built with one pattern only
+    #                                                             work with that pattern
+    rot_theta_deg: float = setting(8.0, range="[0, 180]", unit="deg",
+                                   doc="BRIEFROT angle (paper: 8 degrees, found by the Fig. 9 sweep)")
     # colour descriptors: patches of patch_fraction x the image size; H-S histogram with hs_bins x hs_bins bins
-    color_random_patches: int = 500
-    color_grid: int = 10                   # partitions per axis; half-overlapping patches -> (2g-1)^2 = 361
-    color_patch_fraction: float = 0.1      # 64x48 at 640x480, as in the paper
-    hs_bins: int = 8                       # 8 x 8 = 64-dimensional descriptor
+    color_random_patches: int = setting(500, range="[1, inf)")
+    color_grid: int = setting(10, range="[1, inf)",
+                              doc="partitions per axis; half-overlapping patches -> (2g-1)^2 = 361")
+    color_patch_fraction: float = setting(0.1, range="(0, 1]", doc="64x48 at 640x480, as in the paper")
+    hs_bins: int = setting(8, range="[2, 32]", doc="8 x 8 = 64-dimensional descriptor")
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "descriptor", DescriptorName(self.descriptor))
-        object.__setattr__(self, "distance", Distance(self.distance))
-        checks = [(self.k >= 2, "k must be >= 2"), (self.depth >= 1, "depth must be >= 1"),
-                  (self.kmeans_iters >= 1, "kmeans_iters must be >= 1"),
-                  (self.kmeans_restarts >= 1, "kmeans_restarts must be >= 1"),
-                  (self.min_shared_words >= 1, "min_shared_words must be >= 1"),
-                  (self.n_features >= 1, "n_features must be >= 1"),
-                  (self.brief_patch >= 8, "brief_patch must be >= 8"),
-                  (0 < self.color_patch_fraction <= 1, "color_patch_fraction must be in (0, 1]"),
-                  (self.color_grid >= 1 and self.color_random_patches >= 1, "colour patch counts must be >= 1"),
-                  (2 <= self.hs_bins <= 32, "hs_bins must be in [2, 32]"),
-                  (self.max_train_descriptors >= self.k, "max_train_descriptors must be >= k")]
-        for ok, msg in checks:
-            if not ok:
-                raise ConfigError(f"VocabParams: {msg}")
-
-    def replace(self, **changes) -> "VocabParams":
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict:
-        d = dataclasses.asdict(self)
-        d["descriptor"] = self.descriptor.value
-        d["distance"] = self.distance.value
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "VocabParams":
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(d) - known
-        if unknown:
-            raise ConfigError(f"VocabParams: unknown field(s) {sorted(unknown)}")
-        return cls(**d)
+    def check(self) -> None:
+        if self.max_train_descriptors < self.k:
+            raise ConfigError("max_train_descriptors must be >= k")
 
 
-PRESETS: dict[str, VocabParams] = {
-    # the paper's final choice (Sec. 4.3): k = 8, L = 8, chi-square, 500 features, theta = 8 degrees
-    "paper": VocabParams(k=8, depth=8),
-    # our default: same method, a shallower tree that builds fast from a few hundred images
-    "default": VocabParams(),
-    # tiny vocabularies for tests and quick looks
-    "fast": VocabParams(k=6, depth=3, kmeans_iters=5, n_features=200),
-}
-
-
-def preset(name: str, **overrides) -> VocabParams:
-    """A named preset with some fields overridden, e.g. preset("paper", descriptor="orb")."""
-    if name not in PRESETS:
-        raise ConfigError(f"unknown preset {name!r} (choose from {', '.join(PRESETS)})")
-    return PRESETS[name].replace(**overrides)
+# The presets by name (VocabParams.PRESETS) and a preset with some fields overridden, e.g. preset("paper",
+# descriptor="orb"): the names the package has always exported.
+PRESETS = VocabParams.PRESETS
+preset = VocabParams.preset

@@ -91,9 +91,6 @@ class CameraModel:
     def size(self) -> tuple[int, int]:
         return self.width, self.height
 
-    def with_height(self, camera_height: float, tilt: tuple[float, float] | None = None) -> "CameraModel":
-        return replace(self, camera_height=camera_height, tilt=self.tilt if tilt is None else tilt)
-
     def scaled(self, factor: float) -> "CameraModel":
         """The same camera for an image resized by `factor` (pixel-centre convention of cv2.resize)."""
         return replace(self, width=int(round(self.width * factor)), height=int(round(self.height * factor)),

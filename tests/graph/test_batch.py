@@ -48,11 +48,11 @@ def two_lap_graph(seed=0):
 
 def test_injected_false_loop_is_rejected_and_does_not_bend_the_map():
     data, truth = two_lap_graph()
-    clean = optimize(data, GraphParams.least_squares())
+    clean = optimize(data, GraphParams.preset("least_squares"))
     # one false loop: nodes 3 and 40 claimed to be 0.5 m apart (they are far apart)
     bad = data.append_edges([data.node_ids[40]], [data.node_ids[3]], [[0.5, 0.0, 0.3]], [data.information[0]], True)
-    plain = optimize(bad, GraphParams.least_squares())
-    robust = optimize(bad, GraphParams.default())
+    plain = optimize(bad, GraphParams.preset("least_squares"))
+    robust = optimize(bad, GraphParams())
     is_false = np.zeros(bad.num_loops, bool)
     is_false[-1] = True
     assert ate(clean.poses, plain.poses) > 0.2                   # least squares bends the map
@@ -64,9 +64,9 @@ def test_injected_false_loop_is_rejected_and_does_not_bend_the_map():
 @pytest.mark.parametrize("gate", [True, False])
 def test_many_false_loops_gnc_recovers_the_clean_solution(gate):
     data, truth = two_lap_graph(seed=1)
-    clean = optimize(data, GraphParams.least_squares())
+    clean = optimize(data, GraphParams.preset("least_squares"))
     bad, injected = inject_false_loops(data, 0.5, seed=3)
-    res = optimize(bad, GraphParams.default().with_(gate_loops=gate))
+    res = optimize(bad, GraphParams().replace(gate_loops=gate))
     sc = loop_scores(res.loop_inlier, injected[bad.is_loop])
     assert sc.false_rejected == 1.0
     assert sc.recall >= 0.95
@@ -76,17 +76,17 @@ def test_many_false_loops_gnc_recovers_the_clean_solution(gate):
 def test_gtsam_gnc_backend_runs_and_labels():
     data, _ = two_lap_graph()
     bad = data.append_edges([data.node_ids[40]], [data.node_ids[3]], [[0.5, 0.0, 0.3]], [data.information[0]], True)
-    res = optimize(bad, GraphParams.default().with_(gnc_impl="gtsam", gate_loops=False, reinit_rounds=0))
+    res = optimize(bad, GraphParams().replace(gnc_impl="gtsam", gate_loops=False, reinit_rounds=0))
     assert not res.loop_inlier[-1] and res.loop_inlier[:-1].all()
 
 
 def test_probability_shifts_the_threshold():
     from graph.thresholds import loop_thresholds
 
-    p = GraphParams.default()
+    p = GraphParams()
     c = loop_thresholds(np.array([np.nan, 0.5, 0.99, 0.01]), 3, p)
     assert c[0] == pytest.approx(c[1]) and c[2] > c[0] > c[3] > 0
-    assert np.all(loop_thresholds(np.array([0.01, 0.99]), 3, p.with_(loop_weighting="none")) == c[0])
+    assert np.all(loop_thresholds(np.array([0.01, 0.99]), 3, p.replace(loop_weighting="none")) == c[0])
 
 
 def test_result_maps_ids_and_writers(tmp_path):
@@ -180,6 +180,6 @@ def test_odometry_guess_composes_reversed_edges():
     np.testing.assert_allclose(gb, ga, atol=1e-9)
     # the guess follows odometry, not the loops
     np.testing.assert_allclose(ga[1:4], data.poses[1:4], atol=1e-9)
-    b = optimize(rev, GraphParams.least_squares(), init="odometry")
-    a = optimize(data, GraphParams.least_squares(), init="odometry")
+    b = optimize(rev, GraphParams.preset("least_squares"), init="odometry")
+    a = optimize(data, GraphParams.preset("least_squares"), init="odometry")
     assert ate(a.poses, b.poses) < 0.01      # same graph up to the frame each edge's noise is expressed in

@@ -12,7 +12,7 @@ def graph(seed=0, laps=3):
 @pytest.mark.parametrize("batch", [1, 7])
 def test_isam2_and_batch_agree(batch):
     data, _ = graph()
-    params = GraphParams.least_squares().with_(isam2_batch_nodes=batch)
+    params = GraphParams.preset("least_squares").replace(isam2_batch_nodes=batch)
     lm = optimize(data, params)
     inc = optimize(data, params, solver="isam2")
     assert inc.solver == "isam2" and lm.solver == "lm"
@@ -23,7 +23,7 @@ def test_isam2_and_batch_agree(batch):
 
 def test_incremental_api_places_nodes_by_odometry_and_caches_the_estimate():
     data, truth = graph()
-    inc = IncrementalPoseGraph(params=GraphParams.default().with_(isam2_batch_nodes=5))
+    inc = IncrementalPoseGraph(params=GraphParams().replace(isam2_batch_nodes=5))
     a, b = data.edge_index_pairs()
     loops = []
     for k, nid in enumerate(data.node_ids.tolist()):
@@ -50,9 +50,9 @@ def test_incremental_api_places_nodes_by_odometry_and_caches_the_estimate():
 
 def test_incremental_gate_and_classification_remove_a_false_loop():
     data, _ = graph(seed=2)
-    clean = optimize(data, GraphParams.least_squares())
+    clean = optimize(data, GraphParams.preset("least_squares"))
     bad, injected = inject_false_loops(data, 0.3, seed=5)
-    res = optimize(bad, GraphParams.default(), solver="isam2")
+    res = optimize(bad, GraphParams(), solver="isam2")
     false_loop = injected[bad.is_loop]
     assert not res.loop_inlier[false_loop].any()
     assert res.loop_inlier[~false_loop].mean() >= 0.95
@@ -61,7 +61,7 @@ def test_incremental_gate_and_classification_remove_a_false_loop():
 
 def test_classify_loops_removes_from_and_readds_to_isam2():
     data, _ = graph(seed=4)
-    inc = IncrementalPoseGraph(params=GraphParams.default().with_(gate_loops=False, isam2_batch_nodes=3))
+    inc = IncrementalPoseGraph(params=GraphParams().replace(gate_loops=False, isam2_batch_nodes=3))
     inc.add_node(0, [0, 0, 0])
     for k in range(1, data.num_nodes):
         inc.add_node(k)

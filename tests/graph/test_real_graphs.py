@@ -16,9 +16,9 @@ def csail(shared_data):
 def test_csail_least_squares_and_isam2(csail):
     # edges-only file (1045 poses, 1172 edges): odometry guess, then LM; its near-singular information stops
     # iSAM2's Cholesky, which must fall back to QR and reach the same optimum
-    lm = optimize(csail, GraphParams.least_squares(), init="odometry")
-    lago = optimize(csail, GraphParams.least_squares(), init="lago")
-    inc = optimize(csail, GraphParams.least_squares(), solver="isam2")
+    lm = optimize(csail, GraphParams.preset("least_squares"), init="odometry")
+    lago = optimize(csail, GraphParams.preset("least_squares"), init="lago")
+    inc = optimize(csail, GraphParams.preset("least_squares"), solver="isam2")
     assert lm.final_cost == pytest.approx(20.2754, rel=1e-4)
     assert lago.final_cost == pytest.approx(lm.final_cost, rel=1e-6)
     assert inc.final_cost == pytest.approx(lm.final_cost, rel=1e-2)
@@ -26,9 +26,9 @@ def test_csail_least_squares_and_isam2(csail):
 
 
 def test_csail_half_false_loops(csail):
-    clean = optimize(csail, GraphParams.least_squares())
+    clean = optimize(csail, GraphParams.preset("least_squares"))
     bad, injected = inject_false_loops(csail, 0.5, seed=1)
-    res = optimize(bad, GraphParams.default())
+    res = optimize(bad, GraphParams())
     sc = loop_scores(res.loop_inlier, injected[bad.is_loop])
     assert sc.false_rejected == 1.0 and sc.recall == 1.0
     assert np.abs(res.poses[:, :2] - clean.poses[:, :2]).max() < 1e-3
@@ -46,7 +46,7 @@ def test_sphere2500_gated_solve_falls_back_when_the_gate_start_is_bad():
         pytest.skip(f"{path} not present")
     data = read_graph(path)
     bad, injected = inject_false_loops(data, 0.1, seed=1)
-    res = optimize(bad, GraphParams.default())
+    res = optimize(bad, GraphParams())
     sc = loop_scores(res.loop_inlier, injected[bad.is_loop])
     assert sc.false_rejected == 1.0 and sc.recall == 1.0
     assert any("solved without the gate" in n for n in res.notes)

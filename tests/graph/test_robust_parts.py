@@ -55,11 +55,11 @@ def test_loop_scores():
 
 
 def test_params_presets_and_validation():
-    assert GraphParams.default().robust.value == "gnc"
-    assert GraphParams.fast().lm_max_iterations < GraphParams.default().lm_max_iterations
-    assert GraphParams.robust_strict().inlier_probability < GraphParams.default().inlier_probability
-    assert GraphParams.default().with_(robust="huber", solver="isam2").solver.value == "isam2"
+    assert GraphParams.preset("default").robust.value == "gnc"
+    assert GraphParams.preset("fast").lm_max_iterations < GraphParams.preset("default").lm_max_iterations
+    assert GraphParams.preset("robust_strict").inlier_probability < GraphParams.preset("default").inlier_probability
+    assert GraphParams.preset("default").replace(robust="huber", solver="isam2").solver.value == "isam2"
     with pytest.raises(ValueError):
-        GraphParams.default().with_(robust="tukey")
+        GraphParams.preset("default").replace(robust="tukey")
     with pytest.raises(ValueError, match="gnc_mu_step"):
         GraphParams(gnc_mu_step=1.0)

@@ -32,14 +32,14 @@ def _loop_error(d, poses) -> float:
 
 @pytest.mark.parametrize("robust", ["gnc", "huber", "cauchy"])
 def test_batch_robust_keeps_the_single_true_loop(data, robust):
-    res = optimize(data, GraphParams.default(), robust=robust)
+    res = optimize(data, GraphParams(), robust=robust)
     assert res.loop_inlier.tolist() == [True]
     assert _loop_error(data, data.poses) > 5e-3            # the drift the loop has to close ...
     assert _loop_error(data, res.poses) < 1e-3             # ... is closed
 
 
 def test_isam2_pass_keeps_the_single_true_loop(data):
-    res = optimize(data, GraphParams.default(), solver="isam2")
+    res = optimize(data, GraphParams(), solver="isam2")
     assert res.loop_inlier.tolist() == [True]
     assert _loop_error(data, res.poses) < 1e-3
 
@@ -49,7 +49,7 @@ def test_online_graph_as_the_pipeline_feeds_it_keeps_the_single_true_loop(data, 
     """Nodes with odometry guesses, one update() per node, the loop with its P(loop); then result()."""
     a, b = data.edge_index_pairs()
     newer = np.maximum(a, b)
-    inc = IncrementalPoseGraph(2, GraphParams.default().with_(isam2_batch_nodes=1))
+    inc = IncrementalPoseGraph(2, GraphParams().replace(isam2_batch_nodes=1))
     for k in range(data.num_nodes):
         inc.add_node(int(data.node_ids[k]), data.poses[k])
         for e in np.flatnonzero(newer == k).tolist():

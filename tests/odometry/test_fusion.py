@@ -27,7 +27,7 @@ def _truth(duration, query_t, step=1e-3):
     return poses[np.round(query_t / step).astype(int)]
 
 
-def _streams(duration, rng=None, bias=0.0, scale=0.0, cfg=FusionConfig.default()):
+def _streams(duration, rng=None, bias=0.0, scale=0.0, cfg=FusionConfig()):
     tw = np.arange(0.0, duration, WHEEL_DT)
     tg = np.arange(0.003, duration, GYRO_DT)  # a different clock on purpose
     v, w = _rates(tw)
@@ -225,4 +225,4 @@ def test_repeated_query_times_and_config_presets():
         FusionConfig(gyro_sigma=-1.0)
     with pytest.raises(ValueError, match="unknown fusion preset"):
         FusionConfig.preset("nope")
-    assert FusionConfig.slippery().slip_forward > FusionConfig.default().slip_forward
+    assert FusionConfig.preset("slippery").slip_forward > FusionConfig().slip_forward

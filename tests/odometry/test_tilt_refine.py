@@ -1,6 +1,8 @@
 """Tilt-aware refinement: a wobbling camera's planar motion is recovered where a rigid fit is off by millimetres."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from odometry.rigid import kabsch_2d
@@ -16,8 +18,8 @@ def _views(delta, tilt_ref, tilt_cur, h_ref, h_cur, n=150, seed=0, noise_px=0.0)
     """Normalised coordinates of the same floor points seen by two wobbling cameras, and what a planar model
     that ignores the wobble back-projects them to."""
     rng = np.random.default_rng(seed)
-    ref_cam = CAM.with_height(h_ref, tilt_ref)
-    cur_cam = CAM.with_height(h_cur, tilt_cur)
+    ref_cam = replace(CAM, camera_height=h_ref, tilt=tilt_ref)
+    cur_cam = replace(CAM, camera_height=h_cur, tilt=tilt_cur)
     # floor points visible in both views
     uv = np.column_stack([rng.uniform(40, 600, 4 * n), rng.uniform(40, 440, 4 * n)])
     floor_ref = ref_cam.pixel_to_floor(uv)
@@ -38,7 +40,7 @@ def test_rays_to_floor_batch_matches_the_camera_model():
     heights = np.array([0.5, 0.49, 0.52])
     batch = cam.rays_to_floor_batch(xn, heights, tilts)
     for k in range(3):
-        assert np.allclose(batch[k], cam.with_height(heights[k], tuple(tilts[k])).rays_to_floor(xn), atol=1e-14)
+        assert np.allclose(batch[k], replace(cam, camera_height=heights[k], tilt=tuple(tilts[k])).rays_to_floor(xn), atol=1e-14)
 
 
 def test_refinement_removes_the_wobble_error():

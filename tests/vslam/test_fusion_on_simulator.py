@@ -22,7 +22,7 @@ def _streams(noise: SensorNoise, seed: int = 4):
 
 
 def test_perfect_sensors_reproduce_the_simulated_ground_truth():
-    streams, frames, truth = _streams(SensorNoise.none())
+    streams, frames, truth = _streams(SensorNoise.preset("none"))
     fused = fuse_wheel_gyro(*streams, frames)
     err = fused.poses - between(truth[0], truth)
     err[:, 2] = wrap_angle(err[:, 2])

@@ -6,11 +6,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from odometry.shared.errors import ConfigError
 from odometry.shared.tum import read_tum, tum_to_se2
 from vslam.cli.main import main
 from vslam.io import open_sequence
 from vslam.pipeline import Pipeline, PipelineConfig
-from vslam.pipeline.dataclass_io import ConfigError
 from vslam.sim import SimConfig, simulate
 
 SIM = SimConfig(length=6.0, fps=15.0, speed=0.5, seed=4)
@@ -98,7 +98,7 @@ def test_python_api_is_deterministic_and_online_step_matches_run(run_dir):
 def test_corrupt_frames_do_not_stop_the_run(tmp_path):
     from vslam.sim import Effects
 
-    sim = replace(SIM, length=2.0, effects=replace(Effects.none(), corrupt_frames=0.1), seed=7)
+    sim = replace(SIM, length=2.0, effects=replace(Effects.preset("none"), corrupt_frames=0.1), seed=7)
     res_sim = simulate(sim, tmp_path / "seq")
     assert res_sim.corrupt > 0
     cfg = replace(PipelineConfig(), recording=replace(PipelineConfig().recording, enabled=False))

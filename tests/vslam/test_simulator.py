@@ -48,7 +48,7 @@ def test_sequence_validates_and_streams_agree(tmp_path):
 
 @pytest.mark.parametrize("kind", list(TrajectoryKind))
 def test_noise_free_odometry_integrates_to_ground_truth(tmp_path, kind):
-    cfg = replace(SMALL, trajectory=kind, length=6.0, sensor_noise=SensorNoise.none(), effects=Effects.none(),
+    cfg = replace(SMALL, trajectory=kind, length=6.0, sensor_noise=SensorNoise.preset("none"), effects=Effects.preset("none"),
                   max_frames=40)
     seq = open_sequence(simulate(cfg, tmp_path / "s").path)
     odo = seq.odometry
@@ -70,7 +70,7 @@ def test_closed_paths_return_to_start():
 
 def test_rendered_image_shows_the_floor_under_the_ground_truth_pose():
     """Each pixel shows the floor point the camera model maps it to (no effects, so exactly)."""
-    cfg = replace(SMALL, effects=Effects.none())
+    cfg = replace(SMALL, effects=Effects.preset("none"))
     cam = cfg.camera()
     floor = Floor("gravel", seed=3, resolution=cam.ground_resolution())
     pose = np.array([0.7, -0.4, 0.9])
@@ -131,7 +131,7 @@ def test_every_floor_has_texture(ft):
 
 
 def test_dropped_and_corrupt_frames(tmp_path):
-    eff = replace(Effects.none(), dropped_frames=0.15, corrupt_frames=0.15)
+    eff = replace(Effects.preset("none"), dropped_frames=0.15, corrupt_frames=0.15)
     res = simulate(replace(SMALL, effects=eff, length=4.0), tmp_path / "s")
     assert res.dropped > 0 and res.corrupt > 0
     seq = open_sequence(res.path)

@@ -144,7 +144,7 @@ def clean_runs(ds: Dataset, data, repeat: int, log) -> dict:
 
     from graph import GraphParams, optimize
 
-    ls = GraphParams.least_squares()
+    ls = GraphParams.preset("least_squares")
     init = "lago" if data.dim == 2 else "chordal"
     big = data.num_nodes > 5000
     log(f"  clean: {init} + LM x{repeat}")
@@ -180,9 +180,9 @@ def outlier_runs(ds: Dataset, data, clean: dict, fractions, seed: int, plain_max
         dd, injected = inject_false_loops(data, f, seed)
         false_loop = injected[dd.is_loop]
         row = {"dataset": ds.name, "fraction": f, "injected": int(injected.sum())}
-        runs = [("robust", GraphParams.default())]
+        runs = [("robust", GraphParams())]
         if data.num_nodes <= plain_max:
-            runs.insert(0, ("plain", GraphParams.least_squares().with_(lm_max_iterations=30)))
+            runs.insert(0, ("plain", GraphParams.preset("least_squares").replace(lm_max_iterations=30)))
         else:
             row["plain_note"] = f"skipped: {data.num_nodes} nodes > --plain-lm-max-nodes"
         for tag, params in runs:
@@ -224,14 +224,14 @@ def compare_runs(ds: Dataset, data, clean: dict, fraction: float, seed: int, qui
     rows = []
     methods = COMPARE_METHODS[:4] + COMPARE_METHODS[-1:] if quick else COMPARE_METHODS
     for name, changes, what in methods:
-        params = GraphParams.default().with_(**changes)
+        params = GraphParams().replace(**changes)
         log(f"  compare {name}")
         t0 = time.perf_counter()
         if params.robust == RobustMode.NONE:          # "gate only": least squares on the admitted loops
-            est, admitted = gate_pass(dd, params.with_(robust="gnc"))
+            est, admitted = gate_pass(dd, params.replace(robust="gnc"))
             keep = dd.with_edges(~dd.is_loop | _expand(dd, admitted))
             keep.poses = est
-            res = optimize(keep, params.with_(init="given"))
+            res = optimize(keep, params.replace(init="given"))
             inlier = admitted
         else:
             res = optimize(dd, params)
@@ -270,7 +270,7 @@ def probability_runs(ds: Dataset, data, clean: dict, seed: int, log) -> list[dic
     for weighting in ("none", "threshold", "information"):
         log(f"  probability: {weighting}")
         t0 = time.perf_counter()
-        res = optimize(dd, GraphParams.default().with_(loop_weighting=weighting))
+        res = optimize(dd, GraphParams().replace(loop_weighting=weighting))
         secs = time.perf_counter() - t0
         sc = loop_scores(res.loop_inlier, false_loop)
         err = ate(clean["_clean_poses"], res.poses, data.dim)

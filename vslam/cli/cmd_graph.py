@@ -62,7 +62,7 @@ def run_optimize(a: argparse.Namespace) -> int:
     from odometry.shared.atomic_io import atomic_write_text
 
     data = read_graph(a.input)
-    params = getattr(GraphParams, a.preset)()
+    params = GraphParams.preset(a.preset)
     res = optimize(data, params, solver=a.solver, robust=a.robust, init=a.init)
     write_graph(a.out, data, res.poses)
     print(f"{a.input}: {_describe(data)}")

@@ -65,7 +65,7 @@ def config_from_args(a: argparse.Namespace):
 
     w, h = a.size
     if a.clean:
-        effects = Effects.none()
+        effects = Effects.preset("none")
     else:
         effects = Effects(motion_blur=not a.no_blur, lighting=not a.no_lighting, vignetting=not a.no_vignetting,
                           sensor_noise=not a.no_noise, wobble=not a.no_wobble)

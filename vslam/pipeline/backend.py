@@ -54,7 +54,7 @@ class IncrementalBuilder:
     def __init__(self, params: GraphParams):
         # loops reach the graph already verified (geometry + P(loop) threshold), and a run may close only a few:
         # use those that fit the stated model at once instead of waiting for the gate's 20-loop warm-up
-        self.graph = IncrementalPoseGraph(2, params.with_(gate_warmup_stated=True))
+        self.graph = IncrementalPoseGraph(2, params.replace(gate_warmup_stated=True))
         self.n_loops = 0
 
     def add_node(self, frame: int, guess: np.ndarray) -> None:

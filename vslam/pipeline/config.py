@@ -7,123 +7,78 @@ config file can set anything those expose:
     loops:     {mode: 5, database: {confirmations: 2}}
     graph:     {robust: gnc}
     keyframes: {distance: 0.1}
+
+Loading, dumping, presets, `--set`-style overrides and the range of every value come from
+`odometry.shared.config.Config`.
 """
 from __future__ import annotations
 
-import dataclasses
-import json
+import math
 from dataclasses import dataclass, field
-from pathlib import Path
-
-import yaml
 
 from graph.params import GraphParams
 from loops.cdvs.database import DatabaseParams
 from loops.cdvs.params import MODES
 from odometry.fusion import FusionConfig
+from odometry.shared.config import Config, setting
 from odometry.vo import VOConfig
-from vslam.pipeline.dataclass_io import ConfigError, from_dict, to_dict
 
 
 @dataclass(frozen=True)
-class KeyframePolicy:
+class KeyframePolicy(Config):
     """When a frame becomes a loop keyframe (and a pose-graph node): after the robot moved or turned enough."""
 
     # 0.25 m is well inside the 0.64 x 0.48 m footprint of the default camera: a revisit always finds a stored
     # keyframe within 0.125 m along the track, so J >= 0.33 loops are not missed for lack of keyframes
-    distance: float = 0.25           # metres travelled since the last keyframe
-    angle_deg: float = 20.0          # or degrees turned
-    max_frames: int = 60             # or frames elapsed (keeps the graph connected when standing still)
-
-    def __post_init__(self) -> None:
-        if self.distance <= 0 or self.angle_deg <= 0 or self.max_frames < 1:
-            raise ConfigError("keyframes.distance, angle_deg and max_frames must be positive")
+    distance: float = setting(0.25, range="(0, inf)", unit="m", doc="travelled since the last keyframe")
+    angle_deg: float = setting(20.0, range="(0, inf)", unit="deg", doc="or turned")
+    max_frames: int = setting(60, range="[1, inf)",
+                              doc="or frames elapsed (keeps the graph connected when standing still)")
 
 
 @dataclass(frozen=True)
-class LoopConfig:
+class LoopConfig(Config):
     """Loop detection with compact descriptors (loops.cdvs) and the loop's relative pose on the floor."""
 
     enabled: bool = True
-    mode: int = 4                    # descriptor size mode 1..6 (512 B .. 16 kB per keyframe)
+    mode: int = setting(4, choices=MODES, doc="descriptor size mode 1..6 (512 B .. 16 kB per keyframe)")
     model: str | None = None         # P(loop|score) model JSON; None = the model shipped with the package
     floor_preset: bool = True        # similarity geometry for a downward camera (CdvsParams.floor)
     database: DatabaseParams = field(default_factory=DatabaseParams)
     # keyframes this far back along the path (metres) are not loop candidates; sets database.exclude_recent from
     # the keyframe spacing (None: use database.exclude_recent as given)
-    exclude_distance: float | None = 2.0
-    pose_threshold_px: float = 3.0   # RANSAC threshold of the floor-plane fit of a loop's inlier pairs
-    min_pose_inliers: int = 12       # fewer consistent pairs: the loop gives no pose and is not used
-    pose_pixel_sigma: float = 1.0    # pixel noise of decoded keypoints (coarse coordinate coding)
-
-    def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ConfigError(f"loops.mode must be one of {list(MODES)}, got {self.mode!r}")
-        if self.exclude_distance is not None and self.exclude_distance < 0:
-            raise ConfigError("loops.exclude_distance must be >= 0 metres")
+    exclude_distance: float | None = setting(2.0, range="[0, inf)", unit="m")
+    pose_threshold_px: float = setting(3.0, range="(0, inf)", unit="px",
+                                       doc="RANSAC threshold of the floor-plane fit of a loop's inlier pairs")
+    min_pose_inliers: int = setting(12, range="[2, inf)",
+                                    doc="fewer consistent pairs: the loop gives no pose and is not used")
+    pose_pixel_sigma: float = setting(1.0, range="(0, inf)", unit="px",
+                                      doc="pixel noise of decoded keypoints (coarse coordinate coding)")
 
 
 @dataclass(frozen=True)
-class RecordingConfig:
+class RecordingConfig(Config):
     enabled: bool = True
-    image_every: int = 1             # log every n-th camera image (1 = all)
-    jpeg_quality: int = 70
+    image_every: int = setting(1, range="[1, inf)", doc="log every n-th camera image (1 = all)")
+    jpeg_quality: int = setting(70, range="[0, 100]")
 
 
 @dataclass(frozen=True)
-class PipelineConfig:
+class PipelineConfig(Config):
     vo: VOConfig = field(default_factory=VOConfig)
     fusion: FusionConfig = field(default_factory=FusionConfig)
     keyframes: KeyframePolicy = field(default_factory=KeyframePolicy)
     loops: LoopConfig = field(default_factory=LoopConfig)
     graph: GraphParams = field(default_factory=GraphParams)
     incremental: bool = False        # iSAM2 as keyframes arrive (else batch LM, re-run as loops arrive and at the end)
-    optimize_every: int = 10         # batch mode: re-optimise after this many new accepted loops (0: only at the end)
+    optimize_every: int = setting(10, range="[0, inf)",
+                                  doc="batch mode: re-optimise after this many new accepted loops (0: only at the end)")
     recording: RecordingConfig = field(default_factory=RecordingConfig)
-    seed: int = 0
-
-    # ------------------------------------------------------------------ (de)serialisation
-    def to_dict(self) -> dict:
-        return to_dict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "") -> "PipelineConfig":
-        return from_dict(cls, d, where)
-
-    @classmethod
-    def load(cls, path: str | Path) -> "PipelineConfig":
-        """Read a YAML (.yaml/.yml) or TOML (.toml) config; errors name the file and the setting."""
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: config file not found")
-        text = path.read_text(encoding="utf-8")
-        try:
-            if path.suffix.lower() == ".toml":
-                try:
-                    import tomllib
-                except ModuleNotFoundError:   # Python 3.10
-                    import tomli as tomllib
-
-                data = tomllib.loads(text)
-            else:
-                data = yaml.safe_load(text)
-        except Exception as exc:  # yaml.YAMLError / tomllib.TOMLDecodeError
-            raise ConfigError(f"{path}: cannot parse ({exc})") from None
-        if data is None:
-            data = {}
-        try:
-            return cls.from_dict(data)
-        except ConfigError as exc:
-            raise ConfigError(f"{path}: {exc}") from None
+    seed: int = setting(0, range="[0, inf)")
 
     def database_params(self) -> DatabaseParams:
         """The loop database settings, with the recent-keyframe exclusion converted from metres to keyframes."""
         db = self.loops.database
         if self.loops.exclude_distance is None:
             return db
-        import math
-
-        return dataclasses.replace(db, exclude_recent=int(math.ceil(self.loops.exclude_distance / self.keyframes.distance)))
-
-    def dumps(self) -> str:
-        return yaml.safe_dump(json.loads(json.dumps(self.to_dict())), sort_keys=False)
+        return db.replace(exclude_recent=int(math.ceil(self.loops.exclude_distance / self.keyframes.distance)))

@@ -20,6 +20,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from odometry.shared.config import Config, setting
 from vslam.paths import PACKAGE_DATA
 from vslam.sim.randomness import keyed_rng, lattice_values, smooth_noise
 
@@ -106,20 +107,21 @@ def _prefiltered(file: str, gray: bool, ratio: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class FloorParams:
+class FloorParams(Config):
     """Shape of the procedural floor; defaults give a realistic, non-repeating floor."""
 
-    cell_sizes: tuple[float, float] = (0.22, 0.31)   # metres; two incommensurate layers
-    albedo_amplitude: float = 0.10                    # +-10 % slow brightness variation
-    albedo_spacing: float = 0.6                       # metres between albedo lattice points
-    stain_density: float = 6.0                        # stains per square metre
-    stain_strength: float = 0.18
-    tile_size: float = 0.30                           # ceramic tiles
-    grout_width: float = 0.004
-    plank_width: float = 0.125                        # printed and natural wood
-    plank_length: float = 1.24
-    printed_designs: int = 6                          # distinct laminate prints
-    plank_gap: float = 0.0015
+    cell_sizes: tuple[float, float] = setting((0.22, 0.31), range="(0, inf)", unit="m",
+                                              doc="two incommensurate layers")
+    albedo_amplitude: float = setting(0.10, range="[0, 1]", doc="+-10 % slow brightness variation")
+    albedo_spacing: float = setting(0.6, range="(0, inf)", unit="m", doc="between albedo lattice points")
+    stain_density: float = setting(6.0, range="[0, inf)", unit="1/m^2", doc="stains per square metre")
+    stain_strength: float = setting(0.18, range="[0, 1]")
+    tile_size: float = setting(0.30, range="(0, inf)", unit="m", doc="ceramic tiles")
+    grout_width: float = setting(0.004, range="[0, inf)", unit="m")
+    plank_width: float = setting(0.125, range="(0, inf)", unit="m", doc="printed and natural wood")
+    plank_length: float = setting(1.24, range="(0, inf)", unit="m")
+    printed_designs: int = setting(6, range="[1, inf)", doc="distinct laminate prints")
+    plank_gap: float = setting(0.0015, range="[0, inf)", unit="m")
 
 
 class Floor:

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from odometry.shared.camera import CameraModel
+from odometry.shared.config import Config, setting
 from odometry.shared.poses import rot2, to_matrix
 from odometry.shared.rotations import tilt_matrix
 from vslam.errors import VslamError
@@ -19,28 +20,28 @@ from vslam.sim.floor import Floor
 
 
 @dataclass(frozen=True)
-class Effects:
+class Effects(Config):
     """Camera effects; each can be switched off. Amplitudes are mild and realistic by default."""
 
-    motion_blur: bool = True
-    exposure: float = 0.008          # seconds of exposure for motion blur
-    lighting: bool = True
-    gain_amplitude: float = 0.15     # slow global brightness change (+-)
-    gain_period: float = 23.0        # seconds
-    light_gradient: float = 0.25     # brightness gradient across the image from an off-centre light
-    vignetting: bool = True
-    vignetting_strength: float = 0.30
-    sensor_noise: bool = True
-    noise_std: float = 2.0           # grey levels, plus shot noise
-    wobble: bool = True
-    height_wobble: float = 0.002     # metres
-    tilt_wobble: float = 0.004       # radians (about 0.2 deg)
-    dropped_frames: float = 0.0      # probability per frame
-    corrupt_frames: float = 0.0      # probability per frame
+    PRESETS = {"none": {"motion_blur": False, "lighting": False, "vignetting": False, "sensor_noise": False,
+                        "wobble": False}}
 
-    @classmethod
-    def none(cls) -> "Effects":
-        return cls(motion_blur=False, lighting=False, vignetting=False, sensor_noise=False, wobble=False)
+    motion_blur: bool = True
+    exposure: float = setting(0.008, range="[0, inf)", unit="s", doc="exposure time for motion blur")
+    lighting: bool = True
+    gain_amplitude: float = setting(0.15, range="[0, 1]", doc="slow global brightness change (+-)")
+    gain_period: float = setting(23.0, range="(0, inf)", unit="s")
+    light_gradient: float = setting(0.25, range="[0, inf)",
+                                    doc="brightness gradient across the image from an off-centre light")
+    vignetting: bool = True
+    vignetting_strength: float = setting(0.30, range="[0, 1]")
+    sensor_noise: bool = True
+    noise_std: float = setting(2.0, range="[0, inf)", unit="grey levels", doc="plus shot noise")
+    wobble: bool = True
+    height_wobble: float = setting(0.002, range="[0, inf)", unit="m")
+    tilt_wobble: float = setting(0.004, range="[0, inf)", unit="rad", doc="about 0.2 deg")
+    dropped_frames: float = setting(0.0, range="[0, 1]", doc="probability per frame")
+    corrupt_frames: float = setting(0.0, range="[0, 1]", doc="probability per frame")
 
 
 def pixel_to_world_homography(camera: CameraModel, pose: np.ndarray, height: float, tilt: tuple[float, float]

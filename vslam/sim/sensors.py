@@ -6,30 +6,32 @@ one reproduces the ground truth exactly when noise is off.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
+from odometry.shared.config import Config, setting
+
 
 @dataclass(frozen=True)
-class SensorNoise:
-    v_noise: float = 0.01            # m/s, white
-    omega_noise: float = 0.02        # rad/s, wheel yaw-rate white noise
-    v_scale_error: float = 0.02      # relative: wheel radius error
-    omega_scale_error: float = 0.04  # relative: track-width error
-    slip_rate: float = 0.05          # slip episodes per second
-    slip_duration: float = 0.6       # seconds
-    slip_magnitude: float = 0.15     # relative over-reading of v during a slip
-    gyro_noise: float = 0.004        # rad/s, white
-    gyro_bias: float = 0.004         # rad/s, initial bias
-    gyro_bias_walk: float = 2e-4     # rad/s per sqrt(s)
+class SensorNoise(Config):
+    PRESETS = {"none": {"v_noise": 0.0, "omega_noise": 0.0, "v_scale_error": 0.0, "omega_scale_error": 0.0,
+                        "slip_rate": 0.0, "slip_duration": 0.0, "slip_magnitude": 0.0, "gyro_noise": 0.0,
+                        "gyro_bias": 0.0, "gyro_bias_walk": 0.0}}
 
-    @classmethod
-    def none(cls) -> "SensorNoise":
-        return cls(**{k: 0.0 for k in cls.__dataclass_fields__})
+    v_noise: float = setting(0.01, range="[0, inf)", unit="m/s", doc="white")
+    omega_noise: float = setting(0.02, range="[0, inf)", unit="rad/s", doc="wheel yaw-rate white noise")
+    v_scale_error: float = setting(0.02, range="[0, inf)", doc="relative: wheel radius error")
+    omega_scale_error: float = setting(0.04, range="[0, inf)", doc="relative: track-width error")
+    slip_rate: float = setting(0.05, range="[0, inf)", unit="1/s", doc="slip episodes per second")
+    slip_duration: float = setting(0.6, range="[0, inf)", unit="s")
+    slip_magnitude: float = setting(0.15, range="[0, inf)", doc="relative over-reading of v during a slip")
+    gyro_noise: float = setting(0.004, range="[0, inf)", unit="rad/s", doc="white")
+    gyro_bias: float = setting(0.004, unit="rad/s", doc="initial bias")
+    gyro_bias_walk: float = setting(2e-4, range="[0, inf)", unit="rad/s/sqrt(s)")
 
     def scaled(self, k: float) -> "SensorNoise":
-        return replace(self, **{f: getattr(self, f) * k for f in self.__dataclass_fields__})
+        return self.replace(**{f: getattr(self, f) * k for f in self.__dataclass_fields__})
 
 
 def wheel_measurements(t: np.ndarray, v: np.ndarray, omega: np.ndarray, noise: SensorNoise,

@@ -5,7 +5,6 @@ sim.yaml with the configuration that produced it. Deterministic for a given seed
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -16,6 +15,7 @@ import numpy as np
 import yaml
 
 from odometry.shared.camera import CameraModel
+from odometry.shared.config import Config, setting
 from odometry.shared.tum import se2_to_tum
 from vslam.io.sequence_dir import SequenceWriter
 from vslam.sequence import GyroStream, Trajectory, WheelOdometry
@@ -29,56 +29,34 @@ _P_TRAJ, _P_SENS, _P_FRAME, _P_WOBBLE = 101, 102, 103, 104
 
 
 @dataclass(frozen=True)
-class SimConfig:
+class SimConfig(Config):
     """Everything that defines a simulated sequence. Defaults: ~400 frames, 640x480, carpet, a 10 m closed loop."""
 
     floor: FloorType = FloorType.CARPET
     trajectory: TrajectoryKind = TrajectoryKind.LOOP
-    length: float = 10.0             # metres of path
-    speed: float = 0.5               # m/s nominal
-    fps: float = 20.0
-    width: int = 640
-    height: int = 480
-    focal: float = 500.0             # pixels (fx = fy)
-    camera_height: float = 0.5       # metres
+    length: float = setting(10.0, range="(0, inf)", unit="m", doc="path length")
+    speed: float = setting(0.5, range="(0, inf)", unit="m/s", doc="nominal")
+    fps: float = setting(20.0, range="(0, inf)", unit="Hz")
+    width: int = setting(640, range="[1, inf)", unit="px")
+    height: int = setting(480, range="[1, inf)", unit="px")
+    focal: float = setting(500.0, range="(0, inf)", unit="px", doc="fx = fy")
+    camera_height: float = setting(0.5, range="(0, inf)", unit="m")
     distortion: tuple[float, float, float, float, float] = (-0.04, 0.01, 0.0, 0.0, 0.0)
-    turn_radius: float = 1.0
-    laps: int = 1
-    sensor_rate: float = 100.0       # Hz, wheel odometry and gyro
-    seed: int = 0
+    turn_radius: float = setting(1.0, range="(0, inf)", unit="m")
+    laps: int = setting(1, range="[1, inf)")
+    sensor_rate: float = setting(100.0, range="(0, inf)", unit="Hz", doc="wheel odometry and gyro")
+    seed: int = setting(0, range="[0, inf)")
     gray: bool = True
-    image_format: str = "jpg"
-    jpeg_quality: int = 95
+    image_format: str = setting("jpg", choices=("jpg", "png"))
+    jpeg_quality: int = setting(95, range="[0, 100]")
     effects: Effects = field(default_factory=Effects)
     sensor_noise: SensorNoise = field(default_factory=SensorNoise)
-    max_frames: int | None = None
+    max_frames: int | None = setting(None, range="[1, inf)")
 
     def camera(self) -> CameraModel:
         return CameraModel(width=self.width, height=self.height, fx=self.focal, fy=self.focal,
                            cx=(self.width - 1) / 2, cy=(self.height - 1) / 2, distortion=tuple(self.distortion),
                            camera_height=self.camera_height)
-
-    def to_dict(self) -> dict:
-        d = dataclasses.asdict(self)
-        d["floor"] = FloorType(self.floor).value
-        d["trajectory"] = TrajectoryKind(self.trajectory).value
-        d["distortion"] = list(self.distortion)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "SimConfig":
-        d = dict(d)
-        if "effects" in d:
-            d["effects"] = Effects(**d["effects"])
-        if "sensor_noise" in d:
-            d["sensor_noise"] = SensorNoise(**d["sensor_noise"])
-        if "distortion" in d:
-            d["distortion"] = tuple(d["distortion"])
-        if "floor" in d:
-            d["floor"] = FloorType(d["floor"])
-        if "trajectory" in d:
-            d["trajectory"] = TrajectoryKind(d["trajectory"])
-        return cls(**d)
 
 
 @dataclass(frozen=True)
