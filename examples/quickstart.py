@@ -1,7 +1,7 @@
 """vslam quick start: simulate -> train the loop model -> run SLAM -> evaluate -> open in Rerun.
 
     python examples/quickstart.py [WORKDIR]                    # default WORKDIR: ./quickstart; a few minutes
-    python examples/quickstart.py WORKDIR --length 4 --turn-radius 0.3 --size 320x240 --fps 5   # small
+    python examples/quickstart.py WORKDIR --length 4 --turn-radius 0.3 --size 320x240 --fps 4   # small
 
 Every step is also a command (shown in the comments), so this script doubles as a recipe for the shell.
 Steps whose output already exists in WORKDIR are skipped.
