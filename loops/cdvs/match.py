@@ -7,11 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from loops.cdvs.codec import Descriptor
-from loops.cdvs.geometry import distrat_inliers, ransac, transform_overlap
+from loops.cdvs.geometry import distrat_inliers
 from loops.cdvs.global_desc import global_score
 from loops.cdvs.params import MatchParams
 from loops.cdvs.trained import TrainedParams, load_trained
 from loops.errors import LoopsError
+from loops.geometry import ransac_transform, transform_overlap
 
 
 class IncompatibleDescriptorsError(LoopsError):
@@ -145,8 +146,8 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     if len(keep) < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     thr = p.ransac_threshold_frac * float(np.hypot(*b.proc_size))
-    ok, predict = ransac(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, thr,
-                         scale_range=p.scale_range, max_anisotropy=p.max_anisotropy)
+    ok, predict = ransac_transform(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, thr,
+                                   scale_range=p.scale_range, max_anisotropy=p.max_anisotropy)
     if predict is None or ok.sum() < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     inl = ok if len(top) == len(w) else None
