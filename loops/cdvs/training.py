@@ -28,6 +28,7 @@ import numpy as np
 from loops.cdvs.extract import detector_for, keypoint_attributes, processed_size, to_gray_u8
 from loops.cdvs.params import MODES, CdvsParams, ExtractionParams
 from loops.cdvs.trained import DEFAULT_TRAINED, N_BITS, compute_params_id, save_trained
+from loops.hamming import bit_distances, hamming_matrix
 
 N_CLUSTERS = 64
 RESP_EDGES = np.array([-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0])
@@ -101,12 +102,6 @@ def describe_all(gray: np.ndarray, ex: ExtractionParams):
     resp = np.array([k.response for k in kps])
     lresp = np.log(np.maximum(resp, 1e-12) / max(med, 1e-12))
     return xy, lresp, octave, radius, desc
-
-
-def hamming_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    sa = np.unpackbits(a, axis=1).astype(np.float32) * 2 - 1
-    sb = np.unpackbits(b, axis=1).astype(np.float32) * 2 - 1
-    return (a.shape[1] * 8 - sa @ sb.T) * 0.5
 
 
 # ---------------------------------------------------------------------------------------------- learning steps
@@ -192,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
         dist = np.linalg.norm(proj[:, None, :] - xb[None, :, :], axis=2)
         gt = dist.argmin(axis=1)
         has_gt = dist[np.arange(len(xa)), gt] < 3.0
-        hd = hamming_matrix(da, db)
+        hd = hamming_matrix(da, db).astype(np.float32)
         nn = hd.argmin(axis=1)
         srt = np.sort(hd, axis=1)
         ratio_ok = srt[:, 0] <= 0.85 * srt[:, 1]
@@ -269,11 +264,11 @@ def main(argv: list[str] | None = None) -> int:
         if ga is None or gb is None:
             continue
         c = ga[0] & gb[0]
-        hs_same += np.bincount(np.bitwise_count(ga[1][c] ^ gb[1][c]), minlength=33)
+        hs_same += np.bincount(bit_distances(ga[1][c], gb[1][c]), minlength=33)
         o = glob[other_group(groups, k, rng)][1]
         if o is not None:
             c = ga[0] & o[0]
-            hs_diff += np.bincount(np.bitwise_count(ga[1][c] ^ o[1][c]), minlength=33)
+            hs_diff += np.bincount(bit_distances(ga[1][c], o[1][c]), minlength=33)
     ps, pd = (hs_same + 1) / (hs_same.sum() + 33), (hs_diff + 1) / (hs_diff.sum() + 33)
     omega = ps / (ps + pd)
     hh = np.arange(33)

@@ -147,7 +147,8 @@ def test_verified_transform_gives_the_image_overlap():
 
 def test_two_way_union_matches_the_reference_definition():
     """The vectorised union equals the CDVS definition written with Python sets."""
-    from loops.cdvs.match import _nearest_two, hamming_matrix, local_matches
+    from loops.cdvs.match import _nearest_two, local_matches
+    from loops.hamming import hamming_matrix
 
     a, b = extract(view(700, 600), 3), extract(view(760, 640, angle=20), 3)
     p = MatchParams()
