@@ -154,14 +154,3 @@ def trustworthy_pairs(pairs: np.ndarray, relative, footprint_radius: float, max_
         sigma[k] = sig
         usable[k] = sig <= max_sigma or np.hypot(d[0], d[1]) - n_sigma * sig > 2.0 * footprint_radius
     return usable, sigma
-
-
-def precision_recall(scores: np.ndarray, overlap: np.ndarray, threshold: float, r: float = 0.33) -> tuple[float, float, int]:
-    """Precision and recall of `score >= threshold` against loop = J >= r; also the number of false loops."""
-    acc = scores >= threshold
-    pos = overlap >= r
-    tp = int(np.sum(acc & pos))
-    fp = int(np.sum(acc & ~pos))
-    prec = tp / (tp + fp) if tp + fp else 1.0
-    rec = tp / int(pos.sum()) if pos.any() else float("nan")
-    return prec, rec, fp
