@@ -4,7 +4,7 @@ Sections reuse each package's own parameter classes (VOConfig, FusionConfig, Dat
 config file can set anything those expose:
 
     vo:        {max_features: 300}
-    loops:     {mode: 5, database: {confirmations: 2}}
+    loops:     {mode: 5, database: {confirmations: 2}}      # or {recognizer: vocab, vocab: {min_inliers: 25}}
     graph:     {robust: gnc}
     keyframes: {distance: 0.1}
 """
@@ -18,8 +18,8 @@ from pathlib import Path
 import yaml
 
 from graph.params import GraphParams
-from loops.cdvs.database import DatabaseParams
 from loops.cdvs.params import MODES
+from loops.loop_detector import DatabaseParams
 from odometry.fusion import FusionConfig
 from odometry.vo import VOConfig
 from vslam.pipeline.dataclass_io import ConfigError, from_dict, to_dict
@@ -40,11 +40,34 @@ class KeyframePolicy:
             raise ConfigError("keyframes.distance, angle_deg and max_frames must be positive")
 
 
+RECOGNIZERS = ("cdvs", "vocab")
+
+
+@dataclass(frozen=True)
+class VocabLoopConfig:
+    """Loop detection with the vocabulary tree (loops.vocab), used when loops.recognizer is vocab."""
+
+    vocabulary: str | None = None    # vocabulary file (.voc); None = the floor vocabulary shipped with loops
+    n_features: int = 500            # ORB keypoints per keyframe
+    min_shared_words: int = 5        # a stored keyframe sharing fewer words with the query is not a candidate
+    ratio: float = 0.8               # geometric check: descriptor ratio test of the keypoint matches
+    min_inliers: int = 20            # accepted with at least this many matches on one floor motion
+    threshold_px: float = 6.0        # and within this many pixels of it
+
+    def __post_init__(self) -> None:
+        if self.n_features < 1 or self.min_shared_words < 1 or self.min_inliers < 2:
+            raise ConfigError("loops.vocab: n_features and min_shared_words must be >= 1, min_inliers >= 2")
+        if not 0 < self.ratio <= 1 or self.threshold_px <= 0:
+            raise ConfigError("loops.vocab: ratio must be in (0, 1] and threshold_px > 0")
+
+
 @dataclass(frozen=True)
 class LoopConfig:
-    """Loop detection with compact descriptors (loops.cdvs) and the loop's relative pose on the floor."""
+    """Loop detection (compact descriptors, loops.cdvs, or the vocabulary tree, loops.vocab) and the loop's
+    relative pose on the floor."""
 
     enabled: bool = True
+    recognizer: str = "cdvs"         # "cdvs" or "vocab" (settings in the vocab section)
     mode: int = 4                    # descriptor size mode 1..6 (512 B .. 16 kB per keyframe)
     model: str | None = None         # P(loop|score) model JSON; None = the model shipped with the package
     floor_preset: bool = True        # similarity geometry for a downward camera (CdvsParams.floor)
@@ -55,8 +78,15 @@ class LoopConfig:
     pose_threshold_px: float = 3.0   # RANSAC threshold of the floor-plane fit of a loop's inlier pairs
     min_pose_inliers: int = 12       # fewer consistent pairs: the loop gives no pose and is not used
     pose_pixel_sigma: float = 1.0    # pixel noise of decoded keypoints (coarse coordinate coding)
+    vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
 
     def __post_init__(self) -> None:
+        if self.recognizer == "horizon":
+            raise ConfigError("loops.recognizer: horizon (1D SURF) recognises the skyline seen by a forward-looking "
+                              "camera; the SLAM pipeline's camera looks down at the floor (camera_height), where "
+                              "there is no horizon. Use cdvs or vocab (the horizon recogniser is for `vslam horizon`)")
+        if self.recognizer not in RECOGNIZERS:
+            raise ConfigError(f"loops.recognizer must be one of {', '.join(RECOGNIZERS)}, got {self.recognizer!r}")
         if self.mode not in MODES:
             raise ConfigError(f"loops.mode must be one of {list(MODES)}, got {self.mode!r}")
         if self.exclude_distance is not None and self.exclude_distance < 0:
