@@ -12,7 +12,7 @@ from loops.cdvs.global_desc import global_score
 from loops.cdvs.params import MatchParams
 from loops.cdvs.trained import TrainedParams, load_trained
 from loops.errors import LoopsError
-from loops.geometry import ransac_transform, transform_overlap
+from loops.geometry import Predict, ransac_transform, transform_overlap
 from loops.hamming import hamming_matrix
 
 
@@ -31,6 +31,7 @@ class MatchResult:
     inlier_weights: np.ndarray  # (K,)
     overlap: float = 0.0        # image overlap J implied by the verified transform (0 when nothing was verified);
                                 # for a downward camera the floor-footprint overlap of the two views
+    transform: Predict | None = None  # the verified transform, processed-image pixels of a -> b (None: none)
 
 
 def _nearest_two(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -133,4 +134,4 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     if len(final) < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     return MatchResult(g, float(w[final].sum()), len(w), len(final), a.keypoints[ia[final]], b.keypoints[ib[final]],
-                       w[final], transform_overlap(predict, a.proc_size, b.proc_size))
+                       w[final], transform_overlap(predict, a.proc_size, b.proc_size), predict)

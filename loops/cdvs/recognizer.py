@@ -111,5 +111,6 @@ class CdvsVerifier:
         r = match(query, candidate, self.params.matching, self.trained)
         prob = float(self.model.probability(self.mode, r.local_score)) if self.model is not None else None
         return Verification(accepted=r.local_score >= self.threshold, score=r.local_score, n_inliers=r.n_inliers,
-                            inliers_query=r.inliers_a, inliers_candidate=r.inliers_b, overlap=r.overlap,
+                            inliers_query=r.inliers_a, inliers_candidate=r.inliers_b, transform=r.transform,
+                            overlap=r.overlap,
                             probability=prob, similarity=float(r.global_score), detail=r)
