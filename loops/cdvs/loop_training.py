@@ -18,6 +18,7 @@ from loops.cdvs.match import match
 from loops.cdvs.model import LoopModel, fit_curve
 from loops.cdvs.params import MODES, CdvsParams
 from loops.cdvs.trained import TrainedParams, load_trained
+from odometry.shared.atomic_io import atomic_path
 from odometry.shared.camera import CameraModel
 from odometry.shared.footprint import overlap_matrix
 
@@ -34,8 +35,6 @@ class PairScores:
     usable: np.ndarray | None = None           # (P,) pairs whose label the poses can be trusted for
 
     def save(self, path) -> None:
-        from odometry.shared.atomic_io import atomic_path
-
         arrays = {"pairs": self.pairs, "overlap": self.overlap}
         arrays.update({f"local_{m}": v for m, v in self.local.items()})
         arrays.update({f"global_{m}": v for m, v in self.global_.items()})

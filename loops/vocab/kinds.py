@@ -9,6 +9,7 @@ from __future__ import annotations
 import enum
 
 import numpy as np
+from scipy.sparse import csr_matrix
 
 from loops.hamming import hamming_matrix, hamming_rows
 
@@ -68,8 +69,6 @@ def cluster_sums(kind: DescriptorKind, x: np.ndarray, labels: np.ndarray, n_clus
     @ rows. Both are exact in integers, with no BLAS over the rows (whose threads stall on a loaded machine) and no
     slow scatter-adds. Pass `bits` = unpacked_bits(x) to save unpacking; `weights` (+1 / -1 per row) turns the sums
     into signed updates."""
-    from scipy.sparse import csr_matrix
-
     sizes = np.bincount(labels, minlength=n_clusters)
     if kind is DescriptorKind.BINARY and n_clusters * x.shape[1] * 256 <= _BYTE_HIST_BINS:
         # few clusters (the top of the tree, where every row is still in play): histogram the packed bytes per

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -151,8 +152,6 @@ class PipelineConfig:
         db = self.loops.database
         if self.loops.exclude_distance is None:
             return db
-        import math
-
         return dataclasses.replace(db, exclude_recent=int(math.ceil(self.loops.exclude_distance / self.keyframes.distance)))
 
     def dumps(self) -> str:

@@ -25,6 +25,8 @@ from vslam.errors import VslamError
 from vslam.pipeline.backend import IncrementalBuilder, PoseGraphBuilder
 from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import loop_pose
+from vslam.pipeline.outputs import write_outputs
+from vslam.pipeline.prefetch import prefetch
 from vslam.pipeline.recognizers import build_loop_detector
 
 
@@ -96,8 +98,6 @@ class PipelineResult:
                 "descriptor_bytes_max": int(np.max(self.descriptor_bytes)) if len(self.descriptor_bytes) else 0}
 
     def write(self, out_dir: str | Path, **kw) -> Path:
-        from vslam.pipeline.outputs import write_outputs
-
         return write_outputs(self, out_dir, **kw)
 
 
@@ -310,8 +310,6 @@ class Pipeline:
     def run(self, seq, progress: Callable[[int, int], None] | None = None, max_frames: int | None = None
             ) -> PipelineResult:
         """Process a whole `vslam.sequence.Sequence`; wheel/gyro streams (if any) give the fallback motion."""
-        from vslam.pipeline.prefetch import prefetch
-
         t_start = time.perf_counter()
         self.reset(seq.require_camera())
         n = len(seq) if max_frames is None else min(len(seq), max_frames)
