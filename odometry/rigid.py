@@ -1,4 +1,5 @@
-"""Planar rigid motion between matched floor points: centroid-removed SVD (Kabsch), RANSAC, covariance.
+"""Planar rigid motion between matched floor points: centroid-removed SVD (Kabsch), RANSAC (the shared loop of
+`odometry.shared.ransac` over 2-point hypotheses), covariance.
 
 Convention: `fit` finds (dx, dy, dtheta) such that dst ≈ R(dtheta) src + (dx, dy). For a downward camera, with
 src the floor points of frame k (base frame k) and dst the same floor points in base frame k-1, this motion is
@@ -11,6 +12,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from odometry.shared.ransac import find_consensus, refine_iteratively, sample_pairs
 
 
 @dataclass
@@ -125,42 +128,33 @@ def ransac_rigid_2d(src: np.ndarray, dst: np.ndarray, threshold: float, *, rng: 
         return None
     min_sep = 5.0 * threshold if min_separation is None else min_separation
     thr2 = threshold * threshold
-    best_count, best = 1, None
-    needed = max_iterations
-    done = 0
-    while done < min(needed, max_iterations):
-        k = min(batch, max_iterations - done)
-        i = rng.integers(0, n, k)
-        j = rng.integers(0, n - 1, k)
-        j = j + (j >= i)  # a different second point
-        done += k
-        c, s, t = _two_point_hypotheses(src, dst, i, j, min_sep)
-        if len(c) == 0:
-            continue
+
+    def draw(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        i, j = sample_pairs(rng, n, k)
+        return _two_point_hypotheses(src, dst, i, j, min_sep)
+
+    def evaluate(h: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        c, s, t = h
         # residuals of every point under every hypothesis: (K, N)
         px = c[:, None] * src[None, :, 0] - s[:, None] * src[None, :, 1] + t[:, 0:1] - dst[None, :, 0]
         py = s[:, None] * src[None, :, 0] + c[:, None] * src[None, :, 1] + t[:, 1:2] - dst[None, :, 1]
-        counts = ((px * px + py * py) < thr2).sum(1)
-        h = int(np.argmax(counts))
-        if counts[h] > best_count:
-            best_count = int(counts[h])
-            best = np.array([t[h, 0], t[h, 1], math.atan2(s[h], c[h])])
-            w = best_count / n
-            p_fail = 1.0 - w * w
-            needed = done if p_fail <= 0 else int(math.ceil(math.log(1 - confidence) / math.log(max(p_fail, 1e-12))))
+        inliers = (px * px + py * py) < thr2
+        return inliers.sum(1), inliers
+
+    best = find_consensus(draw, evaluate, max_iterations, batch=batch, better_than=1, confidence=confidence,
+                          n_data=n, sample_size=2)
     if best is None:
         return None
-    delta = best
-    inl = np.zeros(n, dtype=bool)
-    for _ in range(max(1, refine_iterations)):
+    c, s, t = best.hypotheses
+    h = best.index
+    delta0 = np.array([t[h, 0], t[h, 1], math.atan2(s[h], c[h])])
+
+    def inliers_of(delta: np.ndarray) -> np.ndarray:
         r = apply(delta, src) - dst
-        new = (r * r).sum(1) < thr2
-        if new.sum() < 2:
-            break
-        if np.array_equal(new, inl):
-            break
-        inl = new
-        delta = kabsch_2d(src[inl], dst[inl])
+        return (r * r).sum(1) < thr2
+
+    delta, inl = refine_iteratively(delta0, inliers_of, lambda m: kabsch_2d(src[m], dst[m]), refine_iterations,
+                                    2, n)
     if inl.sum() < 2:
         return None
     r = apply(delta, src[inl]) - dst[inl]

@@ -157,3 +157,20 @@ def test_every_params_and_config_class_uses_the_one_config_mechanism():
         if methods & {"with_", "with_height"}:
             bad.append(f"{where}: {cls} has a with_-style copy helper (use replace)")
     assert bad == []
+
+
+# one home per shared numerical concept: no module but its home defines these functions or calls the popcount
+SHARED_DEFINITIONS = {"hamming_matrix": "loops.hamming", "roc_curve": "loops.curves", "auc": "loops.curves",
+                      "tpr_at_fpr": "loops.curves", "pr_curve": "loops.curves", "find_consensus": "odometry.shared.ransac"}
+
+
+def test_shared_kernels_have_one_definition():
+    bad = []
+    for name, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.FunctionDef) and SHARED_DEFINITIONS.get(node.name, name) != name:
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: defines {node.name} "
+                           f"(its home is {SHARED_DEFINITIONS[node.name]})")
+            if (isinstance(node, ast.Attribute) and node.attr == "bitwise_count" and name != "loops.hamming"):
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: popcount outside loops.hamming")
+    assert bad == []

@@ -22,9 +22,11 @@ from loops.cdvs.extract import Features, extract_features
 from loops.cdvs.match import IncompatibleDescriptorsError, MatchResult, match
 from loops.cdvs.model import LoopModel
 from loops.cdvs.params import BUDGETS, MODES, CdvsParams, ExtractionParams, GeometryModel, MatchParams, ModeParams
+from loops.cdvs.recognizer import CdvsRecognizer, CdvsVerifier
 from loops.cdvs.trained import TrainedParams, load_trained
 
-__all__ = ["BUDGETS", "MODES", "Candidate", "CdvsParams", "DatabaseParams", "Descriptor", "DescriptorDecodeError",
-           "ExtractionParams", "Features", "GeometryModel", "IncompatibleDescriptorsError", "LoopDatabase",
-           "LoopModel", "MatchParams", "MatchResult", "ModeParams", "TrainedParams", "decode", "encode",
-           "encode_all_modes", "encode_features", "extract", "extract_features", "load_trained", "match"]
+__all__ = ["BUDGETS", "MODES", "Candidate", "CdvsParams", "CdvsRecognizer", "CdvsVerifier", "DatabaseParams",
+           "Descriptor", "DescriptorDecodeError", "ExtractionParams", "Features", "GeometryModel",
+           "IncompatibleDescriptorsError", "LoopDatabase", "LoopModel", "MatchParams", "MatchResult", "ModeParams",
+           "TrainedParams", "decode", "encode", "encode_all_modes", "encode_features", "extract", "extract_features",
+           "load_trained", "match"]

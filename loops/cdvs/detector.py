@@ -4,6 +4,7 @@ This is what `vslam loops` runs; it needs no odometry, ground truth or camera he
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
@@ -44,8 +45,6 @@ def detect_loops(frames: Iterable[tuple[int, np.ndarray | None]], mode: int, par
                  threshold: float | None = None,
                  on_frame: Callable[[int], None] | None = None) -> tuple[list[LoopRow], DetectionStats]:
     """Run the detector over (frame index, image or None if unreadable) pairs in increasing frame order."""
-    import time
-
     trained = trained or load_trained()
     params = params or CdvsParams.for_mode(mode)
     db = LoopDatabase(mode, params, db_params, model=model, trained=trained, threshold=threshold)

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from loops.cdvs.trained import GLOBAL_BITS, TrainedParams
+from loops.hamming import bit_distances
 
 
 def assign(desc: np.ndarray, codebook: np.ndarray, knn: int = 1) -> np.ndarray:
@@ -71,7 +72,7 @@ def global_score(vis_a: np.ndarray, bits_a: np.ndarray, vis_b: np.ndarray, bits_
     if na == 0 or nb == 0:
         return 0.0
     common = vis_a & vis_b
-    h = np.bitwise_count(bits_a[common] ^ bits_b[common])
+    h = bit_distances(bits_a[common], bits_b[common])
     return float(weights[h].sum() / np.sqrt(na * nb))
 
 
@@ -100,7 +101,7 @@ def global_scores_many(vis_q: np.ndarray, bits_q: np.ndarray, vis_db: np.ndarray
     nq = int(vis_q.sum())
     if nq == 0 or len(bits_db) == 0:
         return np.zeros(len(bits_db))
-    h = np.bitwise_count(bits_db ^ bits_q[None, :])                  # (M, K) uint8 in 0..32
+    h = bit_distances(bits_db, bits_q[None, :])                  # (M, K) uint8 in 0..32
     h |= absent_db if absent_db is not None else absent_marks(vis_db)
     h |= absent_marks(vis_q)[None, :]
     t = cv2.LUT(h, weight_lut(weights) if lut is None else lut)      # T[h], 0 where either side is absent

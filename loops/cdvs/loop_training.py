@@ -18,6 +18,7 @@ from loops.cdvs.match import match
 from loops.cdvs.model import LoopModel, fit_curve
 from loops.cdvs.params import MODES, CdvsParams
 from loops.cdvs.trained import TrainedParams, load_trained
+from odometry.shared.atomic_io import atomic_path
 from odometry.shared.camera import CameraModel
 from odometry.shared.footprint import overlap_matrix
 
@@ -34,8 +35,6 @@ class PairScores:
     usable: np.ndarray | None = None           # (P,) pairs whose label the poses can be trusted for
 
     def save(self, path) -> None:
-        from odometry.shared.atomic_io import atomic_path
-
         arrays = {"pairs": self.pairs, "overlap": self.overlap}
         arrays.update({f"local_{m}": v for m, v in self.local.items()})
         arrays.update({f"global_{m}": v for m, v in self.global_.items()})
@@ -154,14 +153,3 @@ def trustworthy_pairs(pairs: np.ndarray, relative, footprint_radius: float, max_
         sigma[k] = sig
         usable[k] = sig <= max_sigma or np.hypot(d[0], d[1]) - n_sigma * sig > 2.0 * footprint_radius
     return usable, sigma
-
-
-def precision_recall(scores: np.ndarray, overlap: np.ndarray, threshold: float, r: float = 0.33) -> tuple[float, float, int]:
-    """Precision and recall of `score >= threshold` against loop = J >= r; also the number of false loops."""
-    acc = scores >= threshold
-    pos = overlap >= r
-    tp = int(np.sum(acc & pos))
-    fp = int(np.sum(acc & ~pos))
-    prec = tp / (tp + fp) if tp + fp else 1.0
-    rec = tp / int(pos.sum()) if pos.any() else float("nan")
-    return prec, rec, fp

@@ -7,11 +7,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from loops.cdvs.codec import Descriptor
-from loops.cdvs.geometry import distrat_inliers, ransac, transform_overlap
+from loops.cdvs.geometry import distrat_inliers
 from loops.cdvs.global_desc import global_score
 from loops.cdvs.params import MatchParams
 from loops.cdvs.trained import TrainedParams, load_trained
 from loops.errors import LoopsError
+from loops.geometry import Predict, ransac_transform, transform_overlap
+from loops.hamming import hamming_matrix
 
 
 class IncompatibleDescriptorsError(LoopsError):
@@ -29,19 +31,7 @@ class MatchResult:
     inlier_weights: np.ndarray  # (K,)
     overlap: float = 0.0        # image overlap J implied by the verified transform (0 when nothing was verified);
                                 # for a downward camera the floor-footprint overlap of the two views
-
-
-def hamming_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """All-pairs Hamming distances (Na, Nb) of packed descriptors whose length is a multiple of 8 bytes.
-    XOR + popcount per 64-bit word in numpy: no BLAS, ~2x faster than two OpenCV batchDistance K=2 calls."""
-    wa, wb = a.view(np.uint64).T.copy(), b.view(np.uint64).T.copy()    # one contiguous row per 64-bit word
-    t = np.empty((wa.shape[1], wb.shape[1]), dtype=np.uint64)
-    c = np.empty(t.shape, dtype=np.uint8)
-    d = np.zeros(t.shape, dtype=np.uint16)
-    for w in range(wa.shape[0]):     # preallocated temporaries: no allocation per word
-        np.bitwise_xor(wa[w][:, None], wb[w][None, :], out=t)
-        np.add(d, np.bitwise_count(t, out=c), out=d)
-    return d
+    transform: Predict | None = None  # the verified transform, processed-image pixels of a -> b (None: none)
 
 
 def _nearest_two(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -68,16 +58,6 @@ def _nearest_two_both(d: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray, np.n
     return (j, d1r.astype(f), d2r.astype(f)), (i, d1c.astype(f), d2c.astype(f))
 
 
-def _pad8(x: np.ndarray) -> np.ndarray:
-    """Pad rows to a multiple of 8 bytes with zeros (zeros do not change Hamming distances)."""
-    extra = (-x.shape[1]) % 8
-    if not extra:
-        return np.ascontiguousarray(x)
-    out = np.zeros((x.shape[0], x.shape[1] + extra), dtype=np.uint8)   # (np.pad costs ~50 us per call)
-    out[:, : x.shape[1]] = x
-    return out
-
-
 def _one_way(j: np.ndarray, d1: np.ndarray, d2: np.ndarray, ratio: float,
              max_d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     ok = (d1 <= ratio * d2) & (d1 <= max_d) & (d2 > 0) & (j >= 0)
@@ -99,7 +79,7 @@ def local_matches(a: Descriptor, b: Descriptor, p: MatchParams) -> tuple[np.ndar
         e = np.zeros(0, dtype=np.int64)
         return e, e, np.zeros(0)
     n_bytes = min(a.local.shape[1], b.local.shape[1])   # priority-ordered bits: compare the common prefix
-    hd = hamming_matrix(_pad8(a.local[:, :n_bytes]), _pad8(b.local[:, :n_bytes]))
+    hd = hamming_matrix(a.local[:, :n_bytes], b.local[:, :n_bytes])
     max_d = p.max_distance_frac * 8 * n_bytes
     ab, ba = _nearest_two_both(hd)
     i1, j1, w1 = _one_way(*ab, p.ratio, max_d)         # a -> b
@@ -145,8 +125,8 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     if len(keep) < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     thr = p.ransac_threshold_frac * float(np.hypot(*b.proc_size))
-    ok, predict = ransac(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, thr,
-                         scale_range=p.scale_range, max_anisotropy=p.max_anisotropy)
+    ok, predict = ransac_transform(xa[keep], xb[keep], w[keep], p.geometry, p.ransac_iterations, thr,
+                                   scale_range=p.scale_range, max_anisotropy=p.max_anisotropy)
     if predict is None or ok.sum() < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     inl = ok if len(top) == len(w) else None
@@ -154,4 +134,4 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     if len(final) < p.min_inliers:
         return MatchResult(g, 0.0, len(w), 0, empty, empty, np.zeros(0))
     return MatchResult(g, float(w[final].sum()), len(w), len(final), a.keypoints[ia[final]], b.keypoints[ib[final]],
-                       w[final], transform_overlap(predict, a.proc_size, b.proc_size))
+                       w[final], transform_overlap(predict, a.proc_size, b.proc_size), predict)

@@ -16,6 +16,7 @@ import numpy as np
 
 from loops.cdvs.trained import DATA_DIR
 from loops.errors import LoopsError
+from odometry.shared.atomic_io import atomic_write_text
 
 DEFAULT_MODEL = DATA_DIR / "loop_model.json"
 FORMAT = "vslam-loop-model"
@@ -113,8 +114,6 @@ class LoopModel:
                           for m, c in sorted(self.curves.items())}}
 
     def save(self, path: str | Path) -> None:
-        from odometry.shared.atomic_io import atomic_write_text
-
         atomic_write_text(path, json.dumps(self.to_dict(), indent=1) + "\n")
 
     @classmethod

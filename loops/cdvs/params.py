@@ -5,20 +5,13 @@ features, the bits kept per local descriptor and the size of the global descript
 """
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 
+from loops.geometry import GeometryModel
 from odometry.shared.config import Config, ConfigError, setting
 
 MODES = (1, 2, 3, 4, 5, 6)
 BUDGETS = {1: 512, 2: 1024, 3: 2048, 4: 4096, 5: 8192, 6: 16384}
-
-
-class GeometryModel(enum.Enum):
-    """Transform fitted by the few RANSAC iterations after the DISTRAT check."""
-
-    SIMILARITY = "similarity"  # rotation + scale + translation (downward camera over a planar floor)
-    AFFINE = "affine"          # general images: tolerates moderate viewpoint change
 
 
 @dataclass(frozen=True)

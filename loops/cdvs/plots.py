@@ -5,8 +5,11 @@ from pathlib import Path
 
 import numpy as np
 
+from odometry.shared.atomic_io import atomic_path
+
 
 def _plt():
+    # matplotlib is imported on first plot only: it is heavy, and plots are optional outputs
     import matplotlib
 
     matplotlib.use("Agg")
@@ -16,8 +19,6 @@ def _plt():
 
 
 def plot_loop_model(model, path: str | Path) -> None:
-    from odometry.shared.atomic_io import atomic_path
-
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=90)
     for m, c in sorted(model.curves.items()):
@@ -45,8 +46,6 @@ def plot_loop_model(model, path: str | Path) -> None:
 
 def plot_score_matrices(matrices: dict[str, np.ndarray], path: str | Path, title: str = "") -> None:
     """Lower-triangular score matrices (row i = query, column j < i) side by side, each normalised."""
-    from odometry.shared.atomic_io import atomic_path
-
     plt = _plt()
     n = len(matrices)
     fig, axes = plt.subplots(1, n, figsize=(2.6 * n, 2.9), dpi=90, squeeze=False)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from loops.errors import LoopsError
+from odometry.shared.atomic_io import atomic_path
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data"
 DEFAULT_TRAINED = DATA_DIR / "cdvs_trained.npz"
@@ -60,8 +61,6 @@ def compute_params_id(arrays: dict) -> int:
 
 
 def save_trained(path: str | Path, arrays: dict, provenance: dict) -> None:
-    from odometry.shared.atomic_io import atomic_path
-
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
             np.savez_compressed(f, provenance=np.array(json.dumps(provenance)), **{k: arrays[k] for k in ARRAY_FIELDS})
@@ -70,6 +69,11 @@ def save_trained(path: str | Path, arrays: dict, provenance: dict) -> None:
 def load_trained(path: str | Path | None = None) -> TrainedParams:
     """Load a trained parameter file (default: the shipped one). Cached per path."""
     return _load_cached(str(Path(path).resolve()) if path is not None else str(DEFAULT_TRAINED))
+
+
+def forget_loaded() -> None:
+    """Drop the cached parameter files (after writing a new one at a path already loaded)."""
+    _load_cached.cache_clear()
 
 
 @functools.lru_cache(maxsize=8)

@@ -17,6 +17,7 @@ scores seen on different-scene training pairs involving a real photograph, times
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import sys
 import time
@@ -25,9 +26,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from loops.cdvs.extract import detector_for, keypoint_attributes, processed_size, to_gray_u8
+from loops.cdvs.codec import decode, encode_features
+from loops.cdvs.extract import detector_for, extract_features, keypoint_attributes, processed_size, to_gray_u8
+from loops.cdvs.global_desc import aggregate
+from loops.cdvs.match import match
 from loops.cdvs.params import MODES, CdvsParams, ExtractionParams
-from loops.cdvs.trained import DEFAULT_TRAINED, N_BITS, compute_params_id, save_trained
+from loops.cdvs.trained import DEFAULT_TRAINED, N_BITS, compute_params_id, forget_loaded, load_trained, save_trained
+from loops.hamming import bit_distances, hamming_matrix
 
 N_CLUSTERS = 64
 RESP_EDGES = np.array([-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0])
@@ -53,7 +58,6 @@ def training_images(shared: Path, floors: list[Path], rng: np.random.Generator) 
         im = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
         out.append((f"corridor/ref/{p.name}", cv2.resize(im, None, fx=3, fy=3, interpolation=cv2.INTER_CUBIC)))
     for d in floors:
-        import csv
         rows = list(csv.DictReader(open(d / "frames.csv")))
         for r in rows[:: max(1, len(rows) // 20)]:
             out.append((f"floor/{d.name}/{r['image']}", cv2.imread(str(d / r["image"]), cv2.IMREAD_GRAYSCALE)))
@@ -101,12 +105,6 @@ def describe_all(gray: np.ndarray, ex: ExtractionParams):
     resp = np.array([k.response for k in kps])
     lresp = np.log(np.maximum(resp, 1e-12) / max(med, 1e-12))
     return xy, lresp, octave, radius, desc
-
-
-def hamming_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    sa = np.unpackbits(a, axis=1).astype(np.float32) * 2 - 1
-    sb = np.unpackbits(b, axis=1).astype(np.float32) * 2 - 1
-    return (a.shape[1] * 8 - sa @ sb.T) * 0.5
 
 
 # ---------------------------------------------------------------------------------------------- learning steps
@@ -192,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         dist = np.linalg.norm(proj[:, None, :] - xb[None, :, :], axis=2)
         gt = dist.argmin(axis=1)
         has_gt = dist[np.arange(len(xa)), gt] < 3.0
-        hd = hamming_matrix(da, db)
+        hd = hamming_matrix(da, db).astype(np.float32)
         nn = hd.argmin(axis=1)
         srt = np.sort(hd, axis=1)
         ratio_ok = srt[:, 0] <= 0.85 * srt[:, 1]
@@ -254,9 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     save_trained(out, arrays, provenance)
 
     # ---- global weights T[h] from common clusters of same vs different pairs (needs the codebook just saved)
-    from loops.cdvs.global_desc import aggregate
-    from loops.cdvs.trained import _load_cached, load_trained
-    _load_cached.cache_clear()
+    forget_loaded()
     tr = load_trained(out)
     hs_same, hs_diff = np.zeros(33), np.zeros(33)
     glob = []
@@ -269,11 +265,11 @@ def main(argv: list[str] | None = None) -> int:
         if ga is None or gb is None:
             continue
         c = ga[0] & gb[0]
-        hs_same += np.bincount(np.bitwise_count(ga[1][c] ^ gb[1][c]), minlength=33)
+        hs_same += np.bincount(bit_distances(ga[1][c], gb[1][c]), minlength=33)
         o = glob[other_group(groups, k, rng)][1]
         if o is not None:
             c = ga[0] & o[0]
-            hs_diff += np.bincount(np.bitwise_count(ga[1][c] ^ o[1][c]), minlength=33)
+            hs_diff += np.bincount(bit_distances(ga[1][c], o[1][c]), minlength=33)
     ps, pd = (hs_same + 1) / (hs_same.sum() + 33), (hs_diff + 1) / (hs_diff.sum() + 33)
     omega = ps / (ps + pd)
     hh = np.arange(33)
@@ -283,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     weights = np.maximum.accumulate(weights[::-1])[::-1].astype(np.float32)
     arrays["global_weights"] = weights
     save_trained(out, arrays, provenance)
-    _load_cached.cache_clear()
+    forget_loaded()
     print(f"global weights done ({time.time() - t0:.0f} s)", file=sys.stderr)
 
     # ---- per-mode pair decision thresholds from different-scene training pairs
@@ -293,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     provenance["pair_threshold_margins"] = {"local": LOCAL_MARGIN, "global": GLOBAL_MARGIN}
     provenance["params_id"] = compute_params_id(arrays)
     save_trained(out, arrays, provenance)
-    _load_cached.cache_clear()
+    forget_loaded()
     print(json.dumps({"local_threshold": thresholds[0].tolist(), "global_threshold": thresholds[1].tolist()}),
           file=sys.stderr)
     print(f"wrote {out} ({out.stat().st_size} bytes, {time.time() - t0:.0f} s)", file=sys.stderr)
@@ -315,11 +311,6 @@ def other_group(groups: list[str], k: int, rng: np.random.Generator) -> int:
 
 
 def pair_thresholds(grays, groups, path: Path, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    from loops.cdvs.codec import decode, encode_features
-    from loops.cdvs.extract import extract_features
-    from loops.cdvs.match import match
-    from loops.cdvs.trained import load_trained
-
     tr = load_trained(path)
     ex = ExtractionParams()
     feats = [extract_features(g, ex, tr) for g in grays]

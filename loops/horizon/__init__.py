@@ -23,13 +23,13 @@ from loops.horizon.memory import (
                                   save_memory,
 )
 from loops.horizon.params import PRESETS, HorizonParams, SampleMode
-from loops.horizon.roc import auc, roc_curve, tpr_at_fpr
+from loops.horizon.recognizer import HorizonRecognizer, HorizonVerifier
 from loops.horizon.signal import HorizonError, HorizonLine, horizon_signal, sample_columns
 from loops.horizon.surf1d import HorizonFeatures, detect_and_describe, extract_features, lobe_sizes, responses
 
 __all__ = [
-    "HorizonError", "HorizonFeatures", "HorizonLine", "HorizonParams", "Landmark", "LandmarkMemory",
-    "MEMORY_VERSION", "MatchResult", "MemoryFormatError", "PRESETS", "Recognition", "SampleMode", "auc",
-    "detect_and_describe", "extract_features", "fit_line_ransac", "horizon_signal", "load_memory", "lobe_sizes",
-    "match", "nn_matches", "responses", "roc_curve", "sample_columns", "save_memory", "tpr_at_fpr",
+    "HorizonError", "HorizonFeatures", "HorizonLine", "HorizonParams", "HorizonRecognizer", "HorizonVerifier",
+    "Landmark", "LandmarkMemory", "MEMORY_VERSION", "MatchResult", "MemoryFormatError", "PRESETS", "Recognition",
+    "SampleMode", "detect_and_describe", "extract_features", "fit_line_ransac", "horizon_signal", "load_memory",
+    "lobe_sizes", "match", "nn_matches", "responses", "sample_columns", "save_memory",
 ]

@@ -11,6 +11,7 @@ import numpy as np
 
 from loops.horizon.params import HorizonParams
 from loops.horizon.surf1d import SIGN_WEIGHT, HorizonFeatures
+from odometry.shared.ransac import all_pairs, find_consensus, refit_if_not_worse, sample_pairs
 
 
 @dataclass(frozen=True)
@@ -92,14 +93,59 @@ def _hypotheses(m: int, iterations: int, seed: int) -> tuple[np.ndarray, np.ndar
     Cached per (m, iterations, seed), so RANSAC is deterministic and needs no random generator per call.
     """
     if m * (m - 1) // 2 <= iterations:
-        i, j = np.triu_indices(m, 1)
+        i, j = all_pairs(m)
     else:
-        rng = np.random.default_rng([seed, m])
-        i = rng.integers(0, m, iterations)
-        j = (i + 1 + rng.integers(0, m - 1, iterations)) % m
+        i, j = sample_pairs(np.random.default_rng([seed, m]), m, iterations, cyclic=True)
     i.setflags(write=False)
     j.setflags(write=False)
     return i, j
+
+
+def _lines(x_test: np.ndarray, x_stored: np.ndarray, pairs: tuple[np.ndarray, np.ndarray], lo: float,
+           hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """(b_s, b_d) of the line through each pair of matches; b_s is NaN where undefined or outside [lo, hi]."""
+    i, j = pairs
+    xs_i = x_stored[i]
+    xt_i = x_test[i]
+    dxs = xs_i - x_stored[j]
+    dxs[dxs == 0] = np.nan                   # two matches on one stored column define no line
+    bs = (xt_i - x_test[j]) / dxs
+    bs[~((bs >= lo) & (bs <= hi))] = np.nan  # NaN fails every inlier test below
+    return bs, xt_i - bs * xs_i
+
+
+def _line_inliers(lines: tuple[np.ndarray, np.ndarray], x_test: np.ndarray, x_stored: np.ndarray,
+                  params: HorizonParams, log_scale_ratio: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Inlier counts and the (lines x matches) 0/1 inlier matrix. Residuals are computed in place in float32
+    (pixels: ample precision); the indicator stays 0/1 float so that counting is a matrix-vector product."""
+    bs, bd = lines
+    res = np.multiply.outer(bs.astype(np.float32), x_stored.astype(np.float32))
+    res += bd.astype(np.float32)[:, None]
+    res -= x_test.astype(np.float32)
+    np.abs(res, out=res)
+    inl = np.less_equal(res, np.float32(params.ransac_tolerance), out=res)
+    if log_scale_ratio is not None:
+        inl *= np.abs(log_scale_ratio - np.log2(bs)[:, None]) <= params.scale_tolerance
+    return inl @ np.ones(len(x_test), np.float32), inl
+
+
+def _refit_line(inliers: np.ndarray, x_test: np.ndarray, x_stored: np.ndarray, params: HorizonParams,
+                log_scale_ratio: np.ndarray | None) -> tuple[tuple[float, float], np.ndarray] | None:
+    """Least-squares line through the consensus set and its inliers (None when degenerate or implausible)."""
+    xs, xt = x_stored[inliers], x_test[inliers]
+    xm, tm = xs.mean(), xt.mean()
+    dx = xs - xm
+    var = float(dx @ dx)
+    if var <= 0:
+        return None
+    rs = float(dx @ (xt - tm)) / var
+    if not 1.0 / params.max_scale_change <= rs <= params.max_scale_change:
+        return None
+    rd = tm - rs * xm
+    mask = np.abs(x_test - (rs * x_stored + rd)) <= params.ransac_tolerance
+    if log_scale_ratio is not None:
+        mask &= np.abs(log_scale_ratio - np.log2(rs)) <= params.scale_tolerance
+    return (rs, rd), mask
 
 
 def fit_line_ransac(x_test: np.ndarray, x_stored: np.ndarray, params: HorizonParams = HorizonParams(),
@@ -110,51 +156,26 @@ def fit_line_ransac(x_test: np.ndarray, x_stored: np.ndarray, params: HorizonPar
 
     With params.scale_tolerance > 0 and log_scale_ratio = log2(test scale / stored scale) per match, an inlier's
     scale ratio must also agree with b_s within that many octaves. The largest consensus set wins (the first
-    hypothesis on ties); the line is then refitted to it by least squares.
+    hypothesis on ties); the line is then refitted to it by least squares, kept if it does not lose inliers.
     """
     m = x_test.shape[0]
     none = (float("nan"), float("nan"), np.zeros(m, bool))
     if m < max(2, params.ransac_min_inliers):
         return none
-    i, j = _hypotheses(m, params.ransac_iterations, params.seed)
-    xs_i = x_stored[i]
-    xt_i = x_test[i]
-    dxs = xs_i - x_stored[j]
-    dxs[dxs == 0] = np.nan                   # two matches on one stored column define no line
-    bs = (xt_i - x_test[j]) / dxs
     lo, hi = 1.0 / params.max_scale_change, params.max_scale_change
-    bs[~((bs >= lo) & (bs <= hi))] = np.nan  # NaN fails every inlier test below
-    bd = xt_i - bs * xs_i
-    # Residuals of every match under every hypothesis, in place in float32 (pixels: ample precision), then the
-    # inlier indicator as 0/1 so that counting is a matrix-vector product.
-    res = np.multiply.outer(bs.astype(np.float32), x_stored.astype(np.float32))
-    res += bd.astype(np.float32)[:, None]
-    res -= x_test.astype(np.float32)
-    np.abs(res, out=res)
-    inl = np.less_equal(res, np.float32(params.ransac_tolerance), out=res)
-    use_scale = params.scale_tolerance > 0 and log_scale_ratio is not None
-    if use_scale:
-        inl *= np.abs(log_scale_ratio - np.log2(bs)[:, None]) <= params.scale_tolerance
-    count = inl @ np.ones(m, np.float32)
-    best = int(count.argmax())
-    if count[best] < params.ransac_min_inliers:
+    lsr = log_scale_ratio if params.scale_tolerance > 0 else None
+    best = find_consensus(lambda _: _lines(x_test, x_stored, _hypotheses(m, params.ransac_iterations, params.seed),
+                                           lo, hi),
+                          lambda lines: _line_inliers(lines, x_test, x_stored, params, lsr), params.ransac_iterations)
+    if best is None or best.score < params.ransac_min_inliers:
         return none
-    b_s, b_d, mask = float(bs[best]), float(bd[best]), inl[best] > 0
-    # Least-squares refit on the consensus set; kept only if it does not lose inliers.
-    xs, xt = x_stored[mask], x_test[mask]
-    xm, tm = xs.mean(), xt.mean()
-    dx = xs - xm
-    var = float(dx @ dx)
-    if var > 0:
-        rs = float(dx @ (xt - tm)) / var
-        if lo <= rs <= hi:
-            rd = tm - rs * xm
-            mask2 = np.abs(x_test - (rs * x_stored + rd)) <= params.ransac_tolerance
-            if use_scale:
-                mask2 &= np.abs(log_scale_ratio - np.log2(rs)) <= params.scale_tolerance
-            if np.count_nonzero(mask2) >= count[best]:
-                b_s, b_d, mask = rs, rd, mask2
-    return b_s, b_d, mask
+    mask = best.inliers > 0
+    refined = refit_if_not_worse(mask, lambda inl: _refit_line(inl, x_test, x_stored, params, lsr), np.count_nonzero)
+    if refined is not None:
+        (rs, rd), mask2 = refined
+        return rs, rd, mask2
+    bs, bd = best.hypotheses
+    return float(bs[best.index]), float(bd[best.index]), mask
 
 
 def match(test: HorizonFeatures, stored: HorizonFeatures, params: HorizonParams = HorizonParams()) -> MatchResult:

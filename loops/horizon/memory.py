@@ -19,6 +19,7 @@ from loops.horizon.matching import MatchResult, match
 from loops.horizon.params import HorizonParams
 from loops.horizon.signal import HorizonLine
 from loops.horizon.surf1d import HorizonFeatures
+from odometry.shared.atomic_io import atomic_path
 
 MEMORY_VERSION = 1
 _FORMAT = "vslam.horizon.memory"
@@ -118,8 +119,6 @@ _RUNTIME_DTYPES = {"x": np.float64, "scale": np.float64, "level": np.intp, "sign
 
 def save_memory(memory: LandmarkMemory, path: str | os.PathLike) -> None:
     """Write `memory` to `path` (.npz) atomically."""
-    from odometry.shared.atomic_io import atomic_path
-
     lms = memory.landmarks
     dim = 2 * memory.params.subregions
     arrays: dict[str, np.ndarray] = {

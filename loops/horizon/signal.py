@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from loops.errors import LoopsError
@@ -40,8 +41,6 @@ def _as_gray(image: np.ndarray) -> np.ndarray:
     if image.ndim == 2:
         return image
     if image.ndim == 3 and image.shape[2] in (3, 4):
-        import cv2
-
         code = cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
         return cv2.cvtColor(np.ascontiguousarray(image), code)
     raise HorizonError(f"expected a grey (H, W) or colour (H, W, 3) image, got an array of shape {image.shape}")
@@ -92,8 +91,6 @@ def horizon_signal(image: np.ndarray, horizon: float | HorizonLine, params: Hori
     r0 = _band_start(row, band)
     _check_band(r0, r0, band, height, f"horizon row {row:g}")
     if box:
-        import cv2
-
         n = width // step
         band_img = image[r0:r0 + band, :n * step]
         if band_img.dtype == np.uint8:

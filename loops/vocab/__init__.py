@@ -13,17 +13,20 @@ from .database import BowDatabase, EmptyMemoryError, Scores, similarity_dense
 from .evaluate import Evaluation, QueryResult, evaluate, evaluate_descriptors, score_rankings
 from .features import GrayscaleImageError, NoFeaturesError, brief_angles, extract, extraction_key, is_grayscale
 from .fileformat import VocabFileError, load_arrays, save_arrays
+from .floor_vocabulary import load_floor_vocabulary
 from .kinds import DescriptorKind
 from .memory import Ranking, VisualMemory, merge_max, vocabulary_seed
-from .metrics import PRCurve, Summary, full_ranks, mu1, mu2, pr_curve, recall_at, repeatability
+from .metrics import Summary, full_ranks, mu1, mu2, recall_at, repeatability
 from .params import PRESETS, DescriptorName, Distance, VocabParams, preset
+from .recognizer import VerifyParams, VocabObservation, VocabRecognizer, VocabVerifier
 from .tree import VocabularyTree, build_tree, load_vocabulary, save_vocabulary
 
 __all__ = [
     "BowDatabase", "DescriptorKind", "DescriptorName", "Distance", "EmptyMemoryError", "Evaluation",
-    "GrayscaleImageError", "NoFeaturesError", "PRCurve", "PRESETS", "QueryResult", "Ranking", "Scores", "Summary",
-    "VisualMemory", "VocabFileError", "VocabParams", "VocabularyTree", "brief_angles", "build_tree", "evaluate",
-    "evaluate_descriptors", "extract", "extraction_key", "full_ranks", "is_grayscale", "load_arrays",
-    "load_vocabulary", "merge_max", "mu1", "mu2", "pr_curve", "preset", "recall_at", "repeatability", "save_arrays",
-    "save_vocabulary", "score_rankings", "similarity_dense", "vocabulary_seed",
+    "GrayscaleImageError", "NoFeaturesError", "PRESETS", "QueryResult", "Ranking", "Scores", "Summary",
+    "VerifyParams", "VisualMemory", "VocabFileError", "VocabObservation", "VocabParams", "VocabRecognizer",
+    "VocabVerifier", "VocabularyTree", "brief_angles", "build_tree", "evaluate", "evaluate_descriptors", "extract",
+    "extraction_key", "full_ranks", "is_grayscale", "load_arrays", "load_floor_vocabulary", "load_vocabulary",
+    "merge_max", "mu1", "mu2", "preset", "recall_at", "repeatability", "save_arrays", "save_vocabulary",
+    "score_rankings", "similarity_dense", "vocabulary_seed",
 ]

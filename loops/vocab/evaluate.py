@@ -7,9 +7,11 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from loops.curves import PRCurve, pr_curve
+
 from .features import NoFeaturesError
 from .memory import Ranking, VisualMemory
-from .metrics import Summary, mu1, mu2, pr_curve, recall_at, summarise
+from .metrics import Summary, mu1, mu2, recall_at, summarise
 
 _EMPTY = Ranking(np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64))
 
@@ -48,7 +50,7 @@ class Evaluation:
         correct = np.array([len(r.ranking) > 0 and int(r.ranking.keys[0]) in r.true_keys for r in s], bool)
         return scores, correct
 
-    def pr(self):
+    def pr(self) -> PRCurve:
         return pr_curve(*self._top())
 
     def winner_counts(self, n_vocab: int) -> np.ndarray:

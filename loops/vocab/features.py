@@ -88,30 +88,45 @@ def extract(image: np.ndarray, params: VocabParams, mask: np.ndarray | None = No
     """Descriptors of one image (BGR or grey uint8), one array per pattern angle (angles other than 0 only for
     BRIEF/BRIEFROT). `mask` (uint8, non-zero = usable) restricts keypoints / patch centres to part of the image.
     Raises NoFeaturesError when nothing is found, GrayscaleImageError for colour descriptors on a grey image."""
+    return extract_with_keypoints(image, params, mask, angles, name)[1]
+
+
+def extract_with_keypoints(image: np.ndarray, params: VocabParams, mask: np.ndarray | None = None,
+                           angles: tuple[float, ...] = (0.0,), name: str = "image"
+                           ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Like extract(), with the (N, 2) float32 pixel positions of the described keypoints (patch centres for the
+    colour descriptors) in the image as given, for a geometric check of matches."""
     d = params.descriptor
     if any(a != 0.0 for a in angles) and d not in (DescriptorName.BRIEF, DescriptorName.BRIEFROT):
         raise ValueError(f"pattern rotation only applies to BRIEF, not {d.value}")
     if d.is_color and is_grayscale(image):
         raise GrayscaleImageError(f"{name}: is a grayscale image; the {d.value} vocabulary needs colour images "
                                   "(use brief, briefrot, orb or surf)")
+    size = image.shape[:2] if image is not None else (0, 0)
     image, mask = prepare(image, params, mask)
     if d in (DescriptorName.BRIEF, DescriptorName.BRIEFROT):
-        out = _brief(image, params, mask, angles)
+        xy, out = _brief(image, params, mask, angles)
     elif d is DescriptorName.ORB:
-        _, des = cv2.ORB_create(nfeatures=params.n_features).detectAndCompute(_gray(image), mask)
-        out = [des if des is not None else np.zeros((0, 32), np.uint8)]
+        kps, des = cv2.ORB_create(nfeatures=params.n_features).detectAndCompute(_gray(image), mask)
+        xy, out = _points(kps), [des if des is not None else np.zeros((0, 32), np.uint8)]
     elif d is DescriptorName.SURF:
-        _, des = cv2.SIFT_create(nfeatures=params.n_features).detectAndCompute(_gray(image), mask)
-        out = [des.astype(np.float32) if des is not None else np.zeros((0, 128), np.float32)]
+        kps, des = cv2.SIFT_create(nfeatures=params.n_features).detectAndCompute(_gray(image), mask)
+        xy, out = _points(kps), [des.astype(np.float32) if des is not None else np.zeros((0, 128), np.float32)]
     else:
-        out = [_color(image, params, mask)]
+        xy, out = _color(image, params, mask)
     if len(out[0]) == 0:
         raise NoFeaturesError(f"{name}: no {d.value} features found (blank, too small or fully masked image)")
-    return out
+    if image.shape[:2] != size:   # upscaled by prepare(): back to the pixels of the image as given
+        xy = xy * np.array([size[1] / image.shape[1], size[0] / image.shape[0]], np.float32)
+    return xy.astype(np.float32), out
+
+
+def _points(kps) -> np.ndarray:
+    return cv2.KeyPoint_convert(kps).reshape(-1, 2) if kps else np.zeros((0, 2), np.float32)
 
 
 def _brief(image: np.ndarray, params: VocabParams, mask: np.ndarray | None,
-           angles: tuple[float, ...]) -> list[np.ndarray]:
+           angles: tuple[float, ...]) -> tuple[np.ndarray, list[np.ndarray]]:
     gray = _gray(image)
     pattern = _pattern(params.brief_patch, params.brief_pattern_seed)
     radius = pattern_radius(pattern)
@@ -120,7 +135,7 @@ def _brief(image: np.ndarray, params: VocabParams, mask: np.ndarray | None,
     xy = np.rint(cv2.KeyPoint_convert(kps)).astype(np.int32).reshape(-1, 2) if kps else np.zeros((0, 2), np.int32)
     xy = xy[inside(xy, gray.shape, radius)]
     smoothed = smooth_for_brief(gray, params.brief_sigma)
-    return [brief_describe(smoothed, xy, rotated_offsets(pattern, a)) for a in angles]
+    return xy.astype(np.float32), [brief_describe(smoothed, xy, rotated_offsets(pattern, a)) for a in angles]
 
 
 def color_patches(shape: tuple[int, int], params: VocabParams, seed: int | None = None) -> np.ndarray:
@@ -151,15 +166,16 @@ def hs_bins(image: np.ndarray, n_bins: int) -> np.ndarray:
     return np.minimum(hb, n_bins - 1) * n_bins + sb
 
 
-def _color(image: np.ndarray, params: VocabParams, mask: np.ndarray | None) -> np.ndarray:
+def _color(image: np.ndarray, params: VocabParams, mask: np.ndarray | None) -> tuple[np.ndarray, list[np.ndarray]]:
     if image.ndim == 2 or image.shape[2] != 3:
         raise GrayscaleImageError("colour descriptors need a 3-channel BGR image")
     rects = color_patches(image.shape, params)
     if mask is not None:
         cx, cy = rects[:, 0] + rects[:, 2] // 2, rects[:, 1] + rects[:, 3] // 2
         rects = rects[mask[np.minimum(cy, mask.shape[0] - 1), np.minimum(cx, mask.shape[1] - 1)] > 0]
+    centres = (rects[:, :2] + rects[:, 2:4] / 2.0).astype(np.float32)
     if len(rects) == 0:
-        return np.zeros((0, params.hs_bins ** 2), np.float32)
+        return centres, [np.zeros((0, params.hs_bins ** 2), np.float32)]
     nb = params.hs_bins ** 2
     bins = hs_bins(image, params.hs_bins)
     # one integral image per bin would be 64 full-size planes; patches are few, so count them directly with one
@@ -173,7 +189,7 @@ def _color(image: np.ndarray, params: VocabParams, mask: np.ndarray | None) -> n
         b = bins[ys, xs] + (np.arange(len(sel)) * nb)[:, None]
         hist = np.bincount(b.ravel(), minlength=len(sel) * nb).reshape(len(sel), nb)
         out[sel] = hist / hist.sum(axis=1, keepdims=True)
-    return out
+    return centres, [out]
 
 
 def _group_by_size(rects: np.ndarray):

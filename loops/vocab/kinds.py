@@ -1,6 +1,7 @@
 """Descriptor kinds, kept apart from the vocabulary tree (as in DBoW2) so one tree serves every descriptor.
 
-BINARY: packed bit strings (uint8 rows, e.g. 32 bytes = 256 bits), Hamming distance, majority-bit centres.
+BINARY: packed bit strings (uint8 rows, e.g. 32 bytes = 256 bits), Hamming distance (loops.hamming),
+        majority-bit centres.
 FLOAT:  real vectors (float32 rows), Euclidean distance, mean centres.
 """
 from __future__ import annotations
@@ -8,6 +9,9 @@ from __future__ import annotations
 import enum
 
 import numpy as np
+from scipy.sparse import csr_matrix
+
+from loops.hamming import hamming_matrix, hamming_rows
 
 _BYTE_HIST_BINS = 1 << 20   # largest (cluster, byte, value) histogram cluster_sums builds instead of unpacking bits
 _BYTE_BITS = np.unpackbits(np.arange(256, dtype=np.uint8)[:, None], axis=1).astype(np.float64)  # (256, 8), MSB first
@@ -33,30 +37,10 @@ def as_storage(descriptors: np.ndarray, kind: DescriptorKind) -> np.ndarray:
     return np.ascontiguousarray(descriptors, dtype=dtype)
 
 
-def _words(a: np.ndarray) -> np.ndarray:
-    """Packed bits seen as uint64 words when the row length allows it: 8x fewer popcounts."""
-    if a.shape[-1] % 8 == 0 and a.flags.c_contiguous:
-        return a.view(np.uint64)
-    return a
-
-
-def _popcount(words: np.ndarray) -> np.ndarray:
-    """Set bits summed over the last axis, as int32. Adding the few word columns one by one is twice as fast as a
-    reduction over a short last axis."""
-    bc = np.bitwise_count(words)
-    if bc.shape[-1] > 16:
-        return bc.sum(axis=-1, dtype=np.int32)
-    total = bc[..., 0].astype(np.int32)
-    for i in range(1, bc.shape[-1]):
-        total += bc[..., i]
-    return total
-
-
 def distances(kind: DescriptorKind, x: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Distances between rows of x (n, D) and of c (m, D) -> (n, m) float32 (Hamming bits, or Euclidean)."""
     if kind is DescriptorKind.BINARY:
-        xw, cw = _words(np.ascontiguousarray(x)), _words(np.ascontiguousarray(c))
-        return _popcount(xw[:, None, :] ^ cw[None, :, :]).astype(np.float32)
+        return hamming_matrix(x, c).astype(np.float32)
     d2 = (x * x).sum(1)[:, None] - 2.0 * (x @ c.T) + (c * c).sum(1)[None, :]
     return np.sqrt(np.maximum(d2, 0.0)).astype(np.float32)
 
@@ -64,8 +48,7 @@ def distances(kind: DescriptorKind, x: np.ndarray, c: np.ndarray) -> np.ndarray:
 def batched_distances(kind: DescriptorKind, x: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Distances from each row x[i] (n, D) to its own candidates c[i] (n, m, D) -> (n, m)."""
     if kind is DescriptorKind.BINARY:
-        xw, cw = _words(np.ascontiguousarray(x)), _words(np.ascontiguousarray(c))
-        return _popcount(xw[:, None, :] ^ cw).astype(np.float32)
+        return hamming_rows(np.ascontiguousarray(x)[:, None, :], c).astype(np.float32)
     diff = c - x[:, None, :]
     return np.sqrt(np.einsum("nmd,nmd->nm", diff, diff))
 
@@ -73,8 +56,7 @@ def batched_distances(kind: DescriptorKind, x: np.ndarray, c: np.ndarray) -> np.
 def paired_distances(kind: DescriptorKind, x: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Distance between each row x[i] and c[i] (both (n, D)) -> (n,) float32."""
     if kind is DescriptorKind.BINARY:
-        xw, cw = _words(np.ascontiguousarray(x)), _words(np.ascontiguousarray(c))
-        return _popcount(xw ^ cw).astype(np.float32)
+        return hamming_rows(x, c).astype(np.float32)
     diff = x - c
     return np.sqrt(np.einsum("nd,nd->n", diff, diff)).astype(np.float32)
 
@@ -87,8 +69,6 @@ def cluster_sums(kind: DescriptorKind, x: np.ndarray, labels: np.ndarray, n_clus
     @ rows. Both are exact in integers, with no BLAS over the rows (whose threads stall on a loaded machine) and no
     slow scatter-adds. Pass `bits` = unpacked_bits(x) to save unpacking; `weights` (+1 / -1 per row) turns the sums
     into signed updates."""
-    from scipy.sparse import csr_matrix
-
     sizes = np.bincount(labels, minlength=n_clusters)
     if kind is DescriptorKind.BINARY and n_clusters * x.shape[1] * 256 <= _BYTE_HIST_BINS:
         # few clusters (the top of the tree, where every row is still in play): histogram the packed bytes per

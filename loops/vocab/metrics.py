@@ -1,5 +1,6 @@
 """Evaluation of visual-memory localisation: the paper's mu1 / mu2 rank metrics (eqs. 3-4), effectiveness,
-Recall@N, a precision-recall curve over top-1 scores, and repeatability over vocabulary rebuilds (Table 8).
+Recall@N and repeatability over vocabulary rebuilds (Table 8); the precision-recall curve over top-1 scores is
+loops.curves.pr_curve.
 
 Convention for key images left out of a ranking (they share fewer than min_shared words with the query): they
 tie for the remaining places, so each gets the average of those ranks, (m + 1 + n) / 2 with m ranked of n keys.
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from loops.curves import pr_curve
 from loops.errors import LoopsError
 
 
@@ -42,33 +44,6 @@ def mu2(ranked_keys: np.ndarray, key_similarity: np.ndarray, n_keys: int) -> flo
 def recall_at(ranked_keys: np.ndarray, true_keys, n: int) -> bool:
     """True when a ground-truth key image is among the first n ranked candidates."""
     return bool(np.isin(np.asarray(ranked_keys[:n]), np.asarray(list(true_keys))).any())
-
-
-@dataclass(frozen=True)
-class PRCurve:
-    precision: np.ndarray
-    recall: np.ndarray
-    thresholds: np.ndarray
-    average_precision: float
-
-
-def pr_curve(top_scores: np.ndarray, top_correct: np.ndarray) -> PRCurve:
-    """Precision-recall of accepting each query's top-1 key when its score passes a threshold. Queries without any
-    candidate carry score -inf (never accepted) and still count in the recall denominator."""
-    s = np.asarray(top_scores, float)
-    c = np.asarray(top_correct, bool)
-    n = len(s)
-    order = np.argsort(-s, kind="stable")
-    s, c = s[order], c[order]
-    valid = np.isfinite(s)
-    s, c = s[valid], c[valid]
-    tp = np.cumsum(c)
-    k = np.arange(1, len(s) + 1)
-    precision = tp / k
-    recall = tp / max(n, 1)
-    # average precision: precision summed at each correct acceptance, over all queries
-    ap = float(precision[c].sum() / max(n, 1))
-    return PRCurve(precision, recall, s, ap)
 
 
 def repeatability(top1: np.ndarray) -> float:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .fileformat import VocabFileError
+from .fileformat import VocabFileError, load_arrays, save_arrays
 from .kinds import DescriptorKind, as_storage, batched_distances, kind_of
 from .kmeans import grouped_kmeans
 
@@ -145,15 +145,11 @@ VOCAB_FILE_KIND = "vslam-vocabulary"
 
 def save_vocabulary(path, tree: VocabularyTree, info: dict | None = None) -> None:
     """Write one vocabulary to a compact binary file (see fileformat); `info` is free metadata (e.g. params)."""
-    from .fileformat import save_arrays
-
     save_arrays(path, {"kind": VOCAB_FILE_KIND, "tree": tree.meta(), "info": info or {}}, tree.to_arrays())
 
 
 def load_vocabulary(path) -> tuple[VocabularyTree, dict]:
     """Read a vocabulary written by save_vocabulary -> (tree, info)."""
-    from .fileformat import load_arrays
-
     meta, arrays = load_arrays(path)
     if meta.get("kind") != VOCAB_FILE_KIND:
         raise VocabFileError(f"{path}: not a vocabulary file (kind {meta.get('kind')!r})")

@@ -75,7 +75,7 @@ def test_global_scan_is_chunked_and_consistent(descs):
         db.add(k, descs[k % len(descs)])
     g = db.global_scores(descs[0])
     assert g.shape == (40,) and np.argmax(g) % len(descs) == 0
-    import loops.cdvs.database as dbm
+    import loops.cdvs.recognizer as dbm
     old = dbm._CHUNK
     try:
         dbm._CHUNK = 7

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from loops.cdvs import CdvsParams, GeometryModel, IncompatibleDescriptorsError, MatchParams, extract, match
-from loops.cdvs.geometry import distrat_inliers, ransac
+from loops.cdvs.geometry import distrat_inliers
+from loops.geometry import ransac_transform
 from tests.loops.test_cdvs_codec import texture
 
 BIG = texture(11, 1400, 1800)
@@ -67,7 +68,7 @@ def test_geometric_check_rejects_a_shuffled_match_set():
         perm = np.random.default_rng(k).permutation(len(xb))
         inl = distrat_inliers(xa, xb[perm], MatchParams().distrat_chi2)
         if len(inl) >= MatchParams().min_inliers:
-            ok, _ = ransac(xa[inl], xb[perm][inl], np.ones(len(inl)), GeometryModel.AFFINE, 24, 12.0)
+            ok, _ = ransac_transform(xa[inl], xb[perm][inl], np.ones(len(inl)), GeometryModel.AFFINE, 24, 12.0)
             rejected += ok.sum() < MatchParams().min_inliers
         else:
             rejected += 1
@@ -89,8 +90,8 @@ def test_ransac_is_deterministic():
     xa, xb = _true_matches(30, rng)
     w = np.ones(30)
     for model in GeometryModel:
-        m1, f1 = ransac(xa, xb, w, model, 12, 3.0)
-        assert np.array_equal(m1, ransac(xa, xb, w, model, 12, 3.0)[0]) and m1.sum() >= 25
+        m1, f1 = ransac_transform(xa, xb, w, model, 12, 3.0)
+        assert np.array_equal(m1, ransac_transform(xa, xb, w, model, 12, 3.0)[0]) and m1.sum() >= 25
         assert np.median(np.linalg.norm(f1(xa) - xb, axis=1)) < 2.0
 
 
@@ -120,16 +121,16 @@ def test_ransac_rejects_implausible_transforms():
     w = np.ones(30)
     mirrored = xb * [-1.0, 1.0] + [640.0, 0.0]                 # a reflection: no camera motion produces it
     lim = dict(scale_range=MatchParams().scale_range, max_anisotropy=MatchParams().max_anisotropy)
-    assert ransac(xa, mirrored, w, GeometryModel.AFFINE, 24, 3.0, **lim)[0].sum() < MatchParams().min_inliers
-    assert ransac(xa, xb, w, GeometryModel.AFFINE, 24, 3.0, **lim)[0].sum() >= 25
+    assert ransac_transform(xa, mirrored, w, GeometryModel.AFFINE, 24, 3.0, **lim)[0].sum() < MatchParams().min_inliers
+    assert ransac_transform(xa, xb, w, GeometryModel.AFFINE, 24, 3.0, **lim)[0].sum() >= 25
     # a downward camera at a fixed height sees the floor at scale ~1: a 2x "zoom" is no loop
     zoom = 2.0 * xa + [10.0, 5.0]
-    assert ransac(xa, zoom, w, GeometryModel.SIMILARITY, 24, 3.0)[0].sum() == 30
-    assert ransac(xa, zoom, w, GeometryModel.SIMILARITY, 24, 3.0, scale_range=(0.8, 1.25))[1] is None
+    assert ransac_transform(xa, zoom, w, GeometryModel.SIMILARITY, 24, 3.0)[0].sum() == 30
+    assert ransac_transform(xa, zoom, w, GeometryModel.SIMILARITY, 24, 3.0, scale_range=(0.8, 1.25))[1] is None
 
 
 def test_verified_transform_gives_the_image_overlap():
-    from loops.cdvs.geometry import transform_overlap
+    from loops.geometry import transform_overlap
 
     def shift(dx):
         return lambda x: x + [dx, 0.0]
@@ -146,7 +147,8 @@ def test_verified_transform_gives_the_image_overlap():
 
 def test_two_way_union_matches_the_reference_definition():
     """The vectorised union equals the CDVS definition written with Python sets."""
-    from loops.cdvs.match import _nearest_two, hamming_matrix, local_matches
+    from loops.cdvs.match import _nearest_two, local_matches
+    from loops.hamming import hamming_matrix
 
     a, b = extract(view(700, 600), 3), extract(view(760, 640, angle=20), 3)
     p = MatchParams()
@@ -198,7 +200,7 @@ def test_transform_overlap_equals_the_polygon_intersection():
     mirrored maps, disjoint views and a view inside the other."""
     import shapely
 
-    from loops.cdvs.geometry import transform_overlap
+    from loops.geometry import transform_overlap
 
     rng = np.random.default_rng(3)
     for t in range(300):

@@ -9,7 +9,6 @@ from loops.horizon import (
     HorizonLine,
     HorizonParams,
     SampleMode,
-    auc,
     detect_and_describe,
     extract_features,
     fit_line_ransac,
@@ -17,7 +16,6 @@ from loops.horizon import (
     lobe_sizes,
     match,
     nn_matches,
-    roc_curve,
     sample_columns,
 )
 
@@ -276,19 +274,3 @@ def test_params_validate_and_round_trip():
         HorizonParams.from_dict({"band": 3})
     with pytest.raises(ValueError, match="unknown horizon preset"):
         HorizonParams.preset("fast")
-
-
-def test_auc_matches_the_rank_statistic():
-    rng = np.random.default_rng(5)
-    s = rng.integers(0, 8, 300).astype(float)
-    y = rng.random(300) < 0.3
-    s[y] += 2
-    pos, neg = s[y], s[~y]
-    brute = ((pos[:, None] > neg[None, :]).sum() + 0.5 * (pos[:, None] == neg[None, :]).sum()) / (len(pos) * len(neg))
-    assert auc(s, y) == pytest.approx(brute)
-    assert auc([3, 4, 1, 2], [1, 1, 0, 0]) == 1.0
-    assert auc([1, 2, 3, 4], [1, 1, 0, 0]) == 0.0
-    fpr, tpr, thr = roc_curve([5, 5, 5, 5], [1, 0, 1, 0])
-    assert fpr.tolist() == [0, 1] and tpr.tolist() == [0, 1]
-    with pytest.raises(ValueError, match="both matched"):
-        auc([1, 2], [1, 1])

@@ -257,7 +257,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _auc_or_nan(scores, labels) -> float:
-    from loops.horizon import auc
+    from loops.curves import auc
 
     y = np.asarray(labels, bool)
     return auc(scores, y) if y.any() and not y.all() else float("nan")
@@ -266,7 +266,8 @@ def _auc_or_nan(scores, labels) -> float:
 def run(args: argparse.Namespace) -> int:
     import cv2
 
-    from loops.horizon import HorizonParams, extract_features, match, roc_curve, tpr_at_fpr
+    from loops.curves import roc_curve, tpr_at_fpr
+    from loops.horizon import HorizonParams, extract_features, match
     from odometry.shared.atomic_io import atomic_path
     from vslam.bench._common import format_table, write_json
     from vslam.cli.cmd_horizon import parse_overrides, score_pairs_file, write_roc_png

@@ -250,7 +250,7 @@ def _pairs(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from loops.horizon import auc, roc_curve, tpr_at_fpr
+    from loops.curves import auc, roc_curve, tpr_at_fpr
 
     path: Path = args.scores
     if not path.is_file():

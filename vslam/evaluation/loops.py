@@ -1,4 +1,5 @@
-"""Loop-closure quality against footprint-overlap ground truth (seed 001 eq. 3-4): loop(a, b) = J(a, b) >= r."""
+"""Loop-closure quality against footprint-overlap ground truth (seed 001 eq. 3-4): loop(a, b) = J(a, b) >= r.
+The counting is loops.curves.confusion; what is specific here is the ground truth from poses."""
 from __future__ import annotations
 
 import csv
@@ -7,8 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
+from loops.curves import confusion
 from odometry.shared.camera import CameraModel
-from odometry.shared.footprint import DEFAULT_OVERLAP_THRESHOLD, overlap_pairs
+from odometry.shared.footprint import DEFAULT_OVERLAP_THRESHOLD, overlap_matrix, overlap_pairs
 from vslam.errors import VslamError
 
 LOOPS_HEADER = ("query_frame", "match_frame", "global_score", "local_score", "probability", "accepted")
@@ -70,13 +72,10 @@ def loop_precision_recall(camera: CameraModel, gt_poses: np.ndarray, loops: Loop
     q, m = loops.query[keep], loops.match[keep]
     valid = ~np.isnan(gt_poses[q, 0]) & ~np.isnan(gt_poses[m, 0]) if len(q) else np.zeros(0, bool)
     J = overlap_pairs(camera, gt_poses[q[valid]], gt_poses[m[valid]]) if np.any(valid) else np.zeros(0)
-    tp = int(np.sum(J >= r))
-    fp = int(np.sum(J < r))
-    out = {"reported": int(len(q)), "true_positives": tp, "false_positives": fp,
-           "precision": tp / (tp + fp) if tp + fp else float("nan")}
+    reported = confusion(np.ones(len(J), bool), J >= r)      # every reported loop counts as accepted
+    out = {"reported": int(len(q)), "true_positives": reported.true_positives,
+           "false_positives": reported.false_positives, "precision": reported.precision}
     if queried is not None:
-        from odometry.shared.footprint import overlap_matrix
-
         queried = np.asarray(sorted(set(int(i) for i in queried)))
         P = gt_poses[queried]
         ok = ~np.isnan(P[:, 0])
@@ -88,7 +87,7 @@ def loop_precision_recall(camera: CameraModel, gt_poses: np.ndarray, loops: Loop
         positive = np.any((Jm >= r) & earlier, axis=1)
         hit_queries = set(int(a) for a, jj in zip(q[valid], J) if jj >= r)
         found = np.array([int(f) in hit_queries for f in queried])
-        out.update({"queries": int(len(queried)), "positive_queries": int(positive.sum()),
-                    "recalled_queries": int(np.sum(found & positive)),
-                    "recall": float(np.sum(found & positive) / positive.sum()) if positive.sum() else float("nan")})
+        recalled = confusion(found, positive)
+        out.update({"queries": int(len(queried)), "positive_queries": recalled.positives,
+                    "recalled_queries": recalled.true_positives, "recall": recalled.recall})
     return out

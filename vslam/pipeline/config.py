@@ -4,7 +4,7 @@ Sections reuse each package's own parameter classes (VOConfig, FusionConfig, Dat
 config file can set anything those expose:
 
     vo:        {max_features: 300}
-    loops:     {mode: 5, database: {confirmations: 2}}
+    loops:     {mode: 5, database: {confirmations: 2}}      # or {recognizer: vocab, vocab: {min_inliers: 25}}
     graph:     {robust: gnc}
     keyframes: {distance: 0.1}
 
@@ -17,10 +17,10 @@ import math
 from dataclasses import dataclass, field
 
 from graph.params import GraphParams
-from loops.cdvs.database import DatabaseParams
 from loops.cdvs.params import MODES
+from loops.loop_detector import DatabaseParams
 from odometry.fusion import FusionConfig
-from odometry.shared.config import Config, setting
+from odometry.shared.config import Config, ConfigError, setting
 from odometry.vo import VOConfig
 
 
@@ -36,11 +36,29 @@ class KeyframePolicy(Config):
                               doc="or frames elapsed (keeps the graph connected when standing still)")
 
 
+RECOGNIZERS = ("cdvs", "vocab")
+
+
+@dataclass(frozen=True)
+class VocabLoopConfig(Config):
+    """Loop detection with the vocabulary tree (loops.vocab), used when loops.recognizer is vocab."""
+
+    vocabulary: str | None = setting(None, doc="vocabulary file (.voc); None = the floor vocabulary shipped with loops")
+    n_features: int = setting(500, range="[1, inf)", doc="ORB keypoints per keyframe")
+    min_shared_words: int = setting(5, range="[1, inf)",
+                                    doc="a stored keyframe sharing fewer words with the query is not a candidate")
+    ratio: float = setting(0.8, range="(0, 1]", doc="geometric check: descriptor ratio test of the keypoint matches")
+    min_inliers: int = setting(20, range="[2, inf)", doc="accepted with at least this many matches on one floor motion")
+    threshold_px: float = setting(6.0, range="(0, inf)", unit="px", doc="and within this many pixels of it")
+
+
 @dataclass(frozen=True)
 class LoopConfig(Config):
-    """Loop detection with compact descriptors (loops.cdvs) and the loop's relative pose on the floor."""
+    """Loop detection (compact descriptors, loops.cdvs, or the vocabulary tree, loops.vocab) and the loop's
+    relative pose on the floor."""
 
     enabled: bool = True
+    recognizer: str = setting("cdvs", doc="place recogniser: cdvs or vocab (settings in vocab)")
     mode: int = setting(4, choices=MODES, doc="descriptor size mode 1..6 (512 B .. 16 kB per keyframe)")
     model: str | None = None         # P(loop|score) model JSON; None = the model shipped with the package
     floor_preset: bool = True        # similarity geometry for a downward camera (CdvsParams.floor)
@@ -54,6 +72,15 @@ class LoopConfig(Config):
                                     doc="fewer consistent pairs: the loop gives no pose and is not used")
     pose_pixel_sigma: float = setting(1.0, range="(0, inf)", unit="px",
                                       doc="pixel noise of decoded keypoints (coarse coordinate coding)")
+    vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
+
+    def check(self) -> None:
+        if self.recognizer == "horizon":
+            raise ConfigError("loops.recognizer: horizon (1D SURF) recognises the skyline seen by a forward-looking "
+                              "camera; the SLAM pipeline's camera looks down at the floor (camera_height), where "
+                              "there is no horizon. Use cdvs or vocab (the horizon recogniser is for `vslam horizon`)")
+        if self.recognizer not in RECOGNIZERS:
+            raise ConfigError(f"loops.recognizer must be one of {', '.join(RECOGNIZERS)}, got {self.recognizer!r}")
 
 
 @dataclass(frozen=True)

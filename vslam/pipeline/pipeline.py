@@ -1,4 +1,4 @@
-"""The SLAM pipeline: visual odometry -> keyframes -> compact-descriptor loops -> robust pose graph.
+"""The SLAM pipeline: visual odometry -> keyframes -> loops (the configured recogniser) -> robust pose graph.
 
     from vslam.pipeline import Pipeline, PipelineConfig
     result = Pipeline(PipelineConfig()).run(open_sequence("demo/seq"))
@@ -16,10 +16,6 @@ from typing import Callable
 
 import numpy as np
 
-from loops.cdvs.codec import decode, encode
-from loops.cdvs.database import LoopDatabase
-from loops.cdvs.model import LoopModel
-from loops.cdvs.params import CdvsParams
 from odometry.fusion import fuse_wheel_gyro
 from odometry.shared.camera import CameraModel
 from odometry.shared.pose_covariance import compose_with_covariance
@@ -29,6 +25,9 @@ from vslam.errors import VslamError
 from vslam.pipeline.backend import IncrementalBuilder, PoseGraphBuilder
 from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import loop_pose
+from vslam.pipeline.outputs import write_outputs
+from vslam.pipeline.prefetch import prefetch
+from vslam.pipeline.recognizers import build_loop_detector
 
 
 @dataclass
@@ -99,18 +98,7 @@ class PipelineResult:
                 "descriptor_bytes_max": int(np.max(self.descriptor_bytes)) if len(self.descriptor_bytes) else 0}
 
     def write(self, out_dir: str | Path, **kw) -> Path:
-        from vslam.pipeline.outputs import write_outputs
-
         return write_outputs(self, out_dir, **kw)
-
-
-def _default_model():
-    """The loop model shipped with the package (None if this installation lacks it: the database then uses its
-    trained per-mode local-score threshold)."""
-    try:
-        return LoopModel.default()
-    except FileNotFoundError:
-        return None
 
 
 class Pipeline:
@@ -131,10 +119,7 @@ class Pipeline:
         cfg = self.config
         self.camera = camera
         self.vo = VisualOdometry(camera, cfg.vo)
-        lc = cfg.loops
-        self.model = LoopModel.load(lc.model) if lc.model else _default_model()
-        self.cdvs_params = CdvsParams.floor(lc.mode) if lc.floor_preset else CdvsParams.for_mode(lc.mode)
-        self.db = LoopDatabase(lc.mode, self.cdvs_params, cfg.database_params(), model=self.model) if lc.enabled else None
+        self.loop_detector = build_loop_detector(cfg)
         self.graph = IncrementalBuilder(cfg.graph) if cfg.incremental else PoseGraphBuilder(cfg.graph)
         self.rng = np.random.default_rng(cfg.seed)
         self.timestamps: list[float] = []
@@ -210,7 +195,7 @@ class Pipeline:
     def _keyframe_work(self, index: int, image: np.ndarray | None) -> tuple[float, float, list[LoopRecord]]:
         t0 = time.perf_counter()
         self._add_keyframe(index)
-        found = self._detect_loops(index, image) if self.db is not None and image is not None else []
+        found = self._detect_loops(index, image) if self.loop_detector is not None and image is not None else []
         t_loops = time.perf_counter() - t0
         t0 = time.perf_counter()
         self._maybe_optimize()
@@ -236,19 +221,20 @@ class Pipeline:
 
     def _detect_loops(self, index: int, image: np.ndarray) -> list[LoopRecord]:
         lc = self.config.loops
-        data = encode(image, lc.mode, self.cdvs_params)
-        self.descriptor_bytes.append(len(data))
-        desc = decode(data)    # exactly what a robot storing the compact bytes would match against
-        cands = self.db.query(desc, frame_id=index)
-        self.db.add(index, desc)
+        detector = self.loop_detector
+        obs = detector.recognizer.observe(image)   # cdvs: the decoded compact bytes, as a robot would store them
+        self.descriptor_bytes.append(int(obs.nbytes))
+        cands = detector.query(obs, key=index)
+        detector.add(index, obs)
         out = []
         for c in cands:
-            rec = LoopRecord(query_frame=index, match_frame=int(c.frame_id), global_score=float(c.global_score),
-                             local_score=float(c.local_score),
-                             probability=float("nan") if c.probability is None else float(c.probability),
-                             accepted=bool(c.accepted), n_inliers=int(c.n_inliers))
+            v = c.verification
+            rec = LoopRecord(query_frame=index, match_frame=int(c.key), global_score=float(c.global_score),
+                             local_score=float(c.score),
+                             probability=float("nan") if v.probability is None else float(v.probability),
+                             accepted=bool(c.accepted), n_inliers=int(v.n_inliers))
             if rec.accepted:
-                lp = loop_pose(self.camera, c.match.inliers_a, c.match.inliers_b, lc.pose_threshold_px,
+                lp = loop_pose(self.camera, v.inliers_query, v.inliers_candidate, lc.pose_threshold_px,
                                lc.min_pose_inliers, lc.pose_pixel_sigma, self.rng)
                 if lp is not None:
                     rec.delta, rec.covariance, rec.pose_inliers = lp.delta, lp.covariance, lp.n_inliers
@@ -324,8 +310,6 @@ class Pipeline:
     def run(self, seq, progress: Callable[[int, int], None] | None = None, max_frames: int | None = None
             ) -> PipelineResult:
         """Process a whole `vslam.sequence.Sequence`; wheel/gyro streams (if any) give the fallback motion."""
-        from vslam.pipeline.prefetch import prefetch
-
         t_start = time.perf_counter()
         self.reset(seq.require_camera())
         n = len(seq) if max_frames is None else min(len(seq), max_frames)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -26,8 +27,6 @@ class DecodedFrame:
 
 def prefetch(seq: Sequence, gray: bool = True, depth: int = 8, start: int = 0, stop: int | None = None
              ) -> Iterator[DecodedFrame]:
-    import time
-
     stop = len(seq) if stop is None else min(stop, len(seq))
     q: queue.Queue = queue.Queue(maxsize=max(1, depth))
     done = threading.Event()
