@@ -18,6 +18,7 @@ import numpy as np
 from loops.geometry import GeometryModel, ransac_transform, transform_overlap
 from loops.hamming import hamming_matrix
 from loops.recognition import Ranked, Verification
+from odometry.shared.config import Config, setting
 
 from .database import BowDatabase, EmptyMemoryError
 from .features import NoFeaturesError, brief_angles, extract_with_keypoints
@@ -115,16 +116,17 @@ class VocabRecognizer:
 
 
 @dataclass(frozen=True)
-class VerifyParams:
+class VerifyParams(Config):
     """Geometric check of a vocabulary candidate."""
 
-    ratio: float = 0.8                    # Lowe ratio on descriptor distances (nearest <= ratio x second nearest)
-    min_inliers: int = 20                 # accepted with at least this many matches on one transform
-    threshold_px: float = 6.0             # RANSAC inlier distance in pixels
-    iterations: int = 200                 # 2-point (similarity) or 3-point (affine) hypotheses
+    ratio: float = setting(0.8, range="(0, 1]",
+                           doc="Lowe ratio on descriptor distances (nearest <= ratio x second nearest)")
+    min_inliers: int = setting(20, range="[2, inf)", doc="accepted with at least this many matches on one transform")
+    threshold_px: float = setting(6.0, range="(0, inf)", unit="px", doc="RANSAC inlier distance")
+    iterations: int = setting(200, range="[1, inf)", doc="2-point (similarity) or 3-point (affine) hypotheses")
     geometry: GeometryModel = GeometryModel.SIMILARITY
     scale_range: tuple[float, float] = (1.0 / 6.0, 6.0)   # a downward camera at a fixed height: (0.8, 1.25)
-    seed: int = 0
+    seed: int = setting(0, range="[0, inf)")
 
 
 def mutual_ratio_matches(d: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:

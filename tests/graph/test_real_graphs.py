@@ -34,9 +34,11 @@ def test_csail_half_false_loops(csail):
     assert np.abs(res.poses[:, :2] - clean.poses[:, :2]).max() < 1e-3
 
 
-def test_sphere2500_gated_solve_falls_back_when_the_gate_start_is_bad():
-    # sphere2500 (3D, in the gtsam wheel) with 10 % false loops: GNC started from the gate's estimate rejects every
-    # loop, and the chordal re-initialisation is indeterminate for some loop subsets; the ungated solve is right
+def test_sphere2500_with_false_loops_keeps_every_true_loop():
+    # sphere2500 (3D, in the gtsam wheel) with 10 % false loops. Which internal path reaches the answer (gated solve,
+    # or its ungated fallback when the gate's start is bad) depends on floating-point details that differ between
+    # machines and BLAS builds, so only the outcome is asserted: every true loop kept, every false one rejected, and
+    # the map within 5 cm of the clean optimum
     from pathlib import Path
 
     import gtsam
@@ -49,4 +51,5 @@ def test_sphere2500_gated_solve_falls_back_when_the_gate_start_is_bad():
     res = optimize(bad, GraphParams())
     sc = loop_scores(res.loop_inlier, injected[bad.is_loop])
     assert sc.false_rejected == 1.0 and sc.recall == 1.0
-    assert any("solved without the gate" in n for n in res.notes)
+    clean = optimize(data, GraphParams.preset("least_squares"))
+    assert np.abs(res.poses[:, :3] - clean.poses[:, :3]).max() < 0.05   # m, on a sphere of radius 100 m
