@@ -16,7 +16,7 @@ import numpy as np
 
 from loops.cdvs import decode, encode, match
 from odometry.shared.tum import tum_to_se3_matrices
-from vslam.cli.cmd_info import summary
+from vslam.app.info import sequence_summary
 from vslam.cli.main import main as vslam_cli
 from vslam.evaluation import evaluate
 from vslam.io import open_sequence, write_sequence
@@ -32,7 +32,7 @@ work.mkdir(parents=True, exist_ok=True)
 
 # 1. Read it (format detected from the folder layout) and validate it, as `vslam info` does.
 seq = open_sequence(src)
-print(summary(seq))
+print(sequence_summary(seq))
 
 # 2. Convert to the toolkit's sequence directory (images copied byte for byte, ground truth as TUM).
 converted = write_sequence(seq, work / "sequence", overwrite=True)
