@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from odometry.shared.camera import CameraModel
-from odometry.shared.footprint import DEFAULT_OVERLAP_THRESHOLD, overlap_pairs
+from odometry.shared.footprint import DEFAULT_OVERLAP_THRESHOLD, overlap_matrix, overlap_pairs
 from vslam.errors import VslamError
 
 LOOPS_HEADER = ("query_frame", "match_frame", "global_score", "local_score", "probability", "accepted")
@@ -75,8 +75,6 @@ def loop_precision_recall(camera: CameraModel, gt_poses: np.ndarray, loops: Loop
     out = {"reported": int(len(q)), "true_positives": tp, "false_positives": fp,
            "precision": tp / (tp + fp) if tp + fp else float("nan")}
     if queried is not None:
-        from odometry.shared.footprint import overlap_matrix
-
         queried = np.asarray(sorted(set(int(i) for i in queried)))
         P = gt_poses[queried]
         ok = ~np.isnan(P[:, 0])
