@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from vslam.cli.progress import Progress
+
 NAME = "loops"
 HELP = "detect loops in an image sequence with compact descriptors (writes loops.csv)"
 
@@ -33,7 +35,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(a: argparse.Namespace) -> int:
     from vslam.app.loops import detect_sequence_loops  # on use: keeps `vslam --help` fast
-    from vslam.cli.progress import Progress
 
     bar = Progress(0, "loops", enabled=None if not a.quiet else False)
     res = detect_sequence_loops(a.sequence, a.out, mode=a.mode, model=a.model, threshold=a.threshold, every=a.every,

@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
+
+from vslam.cli.progress import Progress
 
 NAME = "run"
 HELP = "run SLAM (VO + compact-descriptor loops + robust pose graph) on a sequence; writes trajectories, loops, " \
@@ -25,9 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def build_config(a: argparse.Namespace):
-    from dataclasses import replace
-
-    from vslam.pipeline.config import PipelineConfig
+    from vslam.pipeline.config import PipelineConfig  # on use: it loads the pose graph (scipy.stats)
 
     cfg = PipelineConfig.load(a.config) if a.config else PipelineConfig()
     loops = cfg.loops
@@ -47,7 +48,6 @@ def build_config(a: argparse.Namespace):
 
 def run(a: argparse.Namespace) -> int:
     from vslam.app.run import run_sequence  # on use: keeps `vslam --help` fast (see vslam.cli.main)
-    from vslam.cli.progress import Progress
 
     cfg = build_config(a)
     if a.print_config:
