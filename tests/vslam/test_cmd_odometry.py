@@ -1,4 +1,4 @@
-"""`vslam odometry` on a small simulated sequence with corrupt and dropped frames; the bench's drift metric."""
+"""`vslam odometry` on a small simulated sequence with corrupt and dropped frames."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +6,6 @@ import pytest
 
 from odometry.shared.poses import between
 from odometry.shared.tum import read_tum, tum_to_se2
-from vslam.bench.odometry import drift_metrics
 from vslam.cli.main import main
 
 
@@ -54,17 +53,3 @@ def test_cli_bad_input_exits_2(tmp_path, capsys):
 def test_cli_rejects_unknown_config_override(faulty_sequence, tmp_path, capsys):
     assert main(["odometry", str(faulty_sequence), "--out", str(tmp_path / "o"), "--set", "bogus=1"]) == 2
     assert "bogus" in capsys.readouterr().err
-
-
-def test_drift_metrics():
-    t = np.linspace(0, 20, 801)
-    gt = np.column_stack([np.cos(t / 3) * 3, np.sin(t / 3) * 3, t / 3 + np.pi / 2])  # a 3 m circle arc
-    m = drift_metrics(gt, gt)
-    assert m["segment_drift_pct"] < 1e-9 and m["end_drift_pct"] < 1e-9
-    line = np.column_stack([np.linspace(0, 12, 601), np.zeros(601), np.zeros(601)])
-    m = drift_metrics(line * [1.01, 1, 1], line)  # a 1 % scale error on a straight path
-    assert abs(m["segment_drift_pct"] - 1.0) < 1e-6 and abs(m["end_drift_pct"] - 1.0) < 1e-6
-    assert m["segment_heading_deg_per_m"] < 1e-9
-    bent = gt.copy()
-    bent[:, 2] += np.radians(0.1) * np.arange(len(gt)) / (len(gt) - 1)  # heading error growing to 0.1 deg
-    assert drift_metrics(bent, gt)["segment_heading_deg_per_m"] > 0

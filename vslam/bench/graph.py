@@ -21,12 +21,22 @@ Datasets that are absent are skipped with a note. Plain least squares on graphs 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-NAME = "graph"
-HELP = "pose-graph back end: solve times, iSAM2 pass, robustness to injected false loops (tables + JSON)"
+import gtsam
+import numpy as np
+
+from graph import GraphParams, RobustMode, inject_false_loops, loop_scores, optimize, read_graph
+from graph.incremental import gate_pass
+from graph.initial import spanning_tree_guess
+from vslam.bench.results import BenchResult, write_json
+from vslam.bench.timing import median
+from vslam.evaluation.metrics import umeyama
+from vslam.evaluation.tables import format_table
+from vslam.paths import shared_data_dir
 
 QUICK = ("w100", "noisyToyGraph", "intel", "CSAIL")
 
@@ -40,14 +50,7 @@ class Dataset:
 
 
 def _datasets() -> list[Dataset]:
-    from vslam.paths import shared_data_dir
-
-    try:
-        import gtsam
-
-        wheel = Path(gtsam.__file__).parent / "Data"
-    except ImportError:  # pragma: no cover - gtsam is a dependency
-        wheel = None
+    wheel = Path(gtsam.__file__).parent / "Data"   # the example graphs shipped in gtsam's wheel
     shared = shared_data_dir()
     pg = shared / "posegraphs" if shared else None
 
@@ -92,11 +95,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 # ------------------------------------------------------------------------------------------------------ helpers
 def groundtruth_poses(path: Path, n: int):
     """Ground-truth poses from an iSAM / TORO edge file with perfect measurements: chain the odometry edges."""
-    import numpy as np
-
-    from graph import read_graph
-    from graph.initial import spanning_tree_guess
-
     gt = read_graph(path)
     a, b = gt.edge_index_pairs()
     poses = spanning_tree_guess(gt, np.zeros(1, np.int64), np.full((1, gt.poses.shape[1]), np.nan), a, b)
@@ -108,24 +106,16 @@ def groundtruth_poses(path: Path, n: int):
 
 def ate(ref, est, dim: int) -> float:
     """RMSE of positions after the rigid alignment of est onto ref."""
-    import numpy as np
-
-    from vslam.evaluation.metrics import umeyama
-
     x, y = est[:, :dim], ref[:, :dim]
     r, t, _ = umeyama(x, y)
     return float(np.sqrt(np.mean(np.sum((y - (x @ r.T + t)) ** 2, axis=1))))
 
 
 def step_rms(poses, dim: int) -> float:
-    import numpy as np
-
     return float(np.sqrt(np.mean(np.sum(np.diff(poses[:, :dim], axis=0) ** 2, axis=1))))
 
 
 def _timed(fn, repeat: int):
-    from vslam.bench._common import median
-
     out, times = None, []
     for _ in range(max(1, repeat)):
         t0 = time.perf_counter()
@@ -140,10 +130,6 @@ def _fmt_s(x) -> str:
 
 # ---------------------------------------------------------------------------------------------------- the runs
 def clean_runs(ds: Dataset, data, repeat: int, log) -> dict:
-    import numpy as np
-
-    from graph import GraphParams, optimize
-
     ls = GraphParams.preset("least_squares")
     init = "lago" if data.dim == 2 else "chordal"
     big = data.num_nodes > 5000
@@ -173,8 +159,6 @@ def clean_runs(ds: Dataset, data, repeat: int, log) -> dict:
 
 
 def outlier_runs(ds: Dataset, data, clean: dict, fractions, seed: int, plain_max: int, log) -> list[dict]:
-    from graph import GraphParams, inject_false_loops, loop_scores, optimize
-
     rows = []
     for f in fractions:
         dd, injected = inject_false_loops(data, f, seed)
@@ -216,9 +200,6 @@ COMPARE_METHODS = [
 
 
 def compare_runs(ds: Dataset, data, clean: dict, fraction: float, seed: int, quick: bool, log) -> list[dict]:
-    from graph import GraphParams, RobustMode, inject_false_loops, loop_scores, optimize
-    from graph.incremental import gate_pass
-
     dd, injected = inject_false_loops(data, fraction, seed)
     false_loop = injected[dd.is_loop]
     rows = []
@@ -246,8 +227,6 @@ def compare_runs(ds: Dataset, data, clean: dict, fraction: float, seed: int, qui
 
 
 def _expand(data, per_loop):
-    import numpy as np
-
     out = np.zeros(data.num_edges, bool)
     out[data.loop_edges()] = per_loop
     return out
@@ -256,10 +235,6 @@ def _expand(data, per_loop):
 def probability_runs(ds: Dataset, data, clean: dict, seed: int, log) -> list[dict]:
     """Equal numbers of true and false loops (fraction 1.0); P(loop) drawn informative but overlapping:
     true ~ U(0.5, 1), false ~ U(0.2, 0.9). Compares the ways the probability can enter."""
-    import numpy as np
-
-    from graph import GraphParams, inject_false_loops, loop_scores, optimize
-
     dd, injected = inject_false_loops(data, 1.0, seed)
     rng = np.random.default_rng(seed + 1000)
     li = dd.loop_edges()
@@ -281,15 +256,12 @@ def probability_runs(ds: Dataset, data, clean: dict, seed: int, log) -> list[dic
 
 
 # -------------------------------------------------------------------------------------------------------- main
-def run(args: argparse.Namespace) -> int:
-    import sys
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
 
-    from graph import read_graph
-    from vslam.bench._common import format_table, write_json
 
-    def log(msg: str) -> None:
-        print(msg, file=sys.stderr, flush=True)
-
+def _selection(args: argparse.Namespace) -> tuple[list[Dataset], list[float], int, list[str]]:
+    """The datasets asked for, the false-loop fractions, the repetitions and the comparison datasets."""
     all_ds = _datasets()
     names = [d.name for d in all_ds]
     wanted = [s.strip() for s in args.datasets.split(",")] if args.datasets else (list(QUICK) if args.quick else names)
@@ -297,77 +269,103 @@ def run(args: argparse.Namespace) -> int:
     if unknown:
         raise ValueError(f"--datasets: unknown dataset(s) {', '.join(unknown)}; known: {', '.join(names)}")
     fractions = [0.5] if args.quick else [float(x) for x in args.fractions.split(",") if x.strip()]
-    repeat = 1 if args.quick else args.repeat
     compare = [c.strip() for c in args.compare.split(",") if c.strip()]
     if args.quick:
         compare = [c for c in compare if c in QUICK] or ["intel"]
-    skipped, clean_rows, out_rows, cmp_rows, prob_rows = [], [], [], [], []
-    t_start = time.perf_counter()
-    for ds in (d for d in all_ds if d.name in wanted):
-        if ds.path is None or not ds.path.exists():
-            skipped.append(f"{ds.name}: not found ({ds.path})")
-            log(f"skip {ds.name}: not found")
-            continue
-        log(f"{ds.name}: {ds.path}")
-        data = read_graph(ds.path)
-        clean = clean_runs(ds, data, repeat, log)
-        clean_rows.append(clean)
-        if data.num_loops:
-            out_rows += outlier_runs(ds, data, clean, fractions, args.seed, args.plain_lm_max_nodes, log)
-        if ds.name in compare and data.num_loops:
-            cmp_rows += compare_runs(ds, data, clean, max(fractions), args.seed, args.quick, log)
-        if ds.name == ("intel" if args.quick else "M3500") and data.num_loops:
-            prob_rows += probability_runs(ds, data, clean, args.seed, log)
-    total = time.perf_counter() - t_start
+    return [d for d in all_ds if d.name in wanted], fractions, 1 if args.quick else args.repeat, compare
 
-    t1 = format_table(
+
+def _measure(args, datasets: list[Dataset], fractions, repeat: int, compare) -> dict[str, list]:
+    """Every run on every present dataset: rows per experiment, and the datasets skipped."""
+    rows: dict[str, list] = {"skipped": [], "clean": [], "outliers": [], "compare": [], "probability": []}
+    for ds in datasets:
+        if ds.path is None or not ds.path.exists():
+            rows["skipped"].append(f"{ds.name}: not found ({ds.path})")
+            _log(f"skip {ds.name}: not found")
+            continue
+        _log(f"{ds.name}: {ds.path}")
+        data = read_graph(ds.path)
+        clean = clean_runs(ds, data, repeat, _log)
+        rows["clean"].append(clean)
+        if data.num_loops:
+            rows["outliers"] += outlier_runs(ds, data, clean, fractions, args.seed, args.plain_lm_max_nodes, _log)
+        if ds.name in compare and data.num_loops:
+            rows["compare"] += compare_runs(ds, data, clean, max(fractions), args.seed, args.quick, _log)
+        if ds.name == ("intel" if args.quick else "M3500") and data.num_loops:
+            rows["probability"] += probability_runs(ds, data, clean, args.seed, _log)
+    return rows
+
+
+def _pct(x) -> str:
+    return f"{100 * x:.1f}"
+
+
+def _clean_table(rows) -> str:
+    return format_table(
         ["dataset", "nodes", "edges", "loops", "LAGO/chordal + LM s", "LM from odometry s", "iSAM2 pass s",
          "iSAM2 updates", "final cost", "iSAM2 cost", "iSAM2 vs LM ATE", "ATE vs GT", "error scale"],
         [[r["dataset"] + (" (3D)" if r["dim"] == 3 else ""), r["nodes"], r["edges"], r["loops"],
           _fmt_s(r.get("lago_lm_s", r.get("chordal_lm_s"))), _fmt_s(r["odometry_lm_s"]), _fmt_s(r["isam2_s"]),
           r["isam2_updates"], f"{r['cost']:.6g}", f"{r['cost_isam2']:.6g}", f"{r['isam2_vs_lm_ate']:.2g}",
           f"{r['ate_vs_groundtruth']:.3g}" if "ate_vs_groundtruth" in r else "-",
-          f"{r['scale']:.3g} ({'GT' if r['scale_kind'].startswith('clean') else 'step'})"] for r in clean_rows])
+          f"{r['scale']:.3g} ({'GT' if r['scale_kind'].startswith('clean') else 'step'})"] for r in rows])
 
-    def pct(x):
-        return f"{100 * x:.1f}"
 
-    t2 = format_table(
+def _outlier_table(rows) -> str:
+    def plain(r, cell):
+        return cell if "plain_err" in r else "-"
+
+    return format_table(
         ["dataset", "false loops", "plain LM: err/scale", "precision", "recall", "false rej. %", "s",
          "robust: err/scale", "precision", "recall", "false rej. %", "s"],
         [[r["dataset"], f"{int(round(100 * r['fraction']))} % ({r['injected']})",
           f"{r['plain_err_ratio']:.3g}" if "plain_err" in r else "skipped",
-          f"{r['plain_precision']:.3f}" if "plain_err" in r else "-",
-          f"{r['plain_recall']:.3f}" if "plain_err" in r else "-",
-          pct(r["plain_false_rejected"]) if "plain_err" in r else "-",
-          _fmt_s(r.get("plain_s")),
+          plain(r, f"{r.get('plain_precision', 0):.3f}"), plain(r, f"{r.get('plain_recall', 0):.3f}"),
+          plain(r, _pct(r.get("plain_false_rejected", 0))), _fmt_s(r.get("plain_s")),
           f"{r['robust_err_ratio']:.3g}", f"{r['robust_precision']:.3f}", f"{r['robust_recall']:.3f}",
-          pct(r["robust_false_rejected"]), _fmt_s(r["robust_s"])] for r in out_rows])
-    t3 = format_table(["dataset", "method", "err/scale", "precision", "recall", "false rej. %", "s"],
-                      [[r["dataset"], r["method"], f"{r['err_ratio']:.3g}", f"{r['precision']:.3f}",
-                        f"{r['recall']:.3f}", pct(r["false_rejected"]), _fmt_s(r["s"])] for r in cmp_rows])
-    t4 = format_table(["dataset", "P(loop) weighting", "err/scale", "precision", "recall", "false rej. %", "s"],
-                      [[r["dataset"], r["weighting"], f"{r['err_ratio']:.3g}", f"{r['precision']:.3f}",
-                        f"{r['recall']:.3f}", pct(r["false_rejected"]), _fmt_s(r["s"])] for r in prob_rows])
-    print("## Clean graphs (times are medians of --repeat runs; iSAM2 on > 5000 nodes: one run)\n")
-    print(t1)
-    print(f"\n## Injected false loops (seed {args.seed}); err = ATE vs the clean solution, scale as in column "
-          "'error scale'; target err/scale <= 0.05\n")
-    print(t2)
-    if cmp_rows:
-        print(f"\n## Robust methods on the same injected loops ({int(round(100 * max(fractions)))} %)\n")
-        print(t3)
-    if prob_rows:
-        print("\n## Loop probability (as many false loops as true; p true ~ U(0.5, 1), false ~ U(0.2, 0.9))\n")
-        print(t4)
-    for s in skipped:
-        print(f"\nskipped {s}")
-    print(f"\ntotal {total:.0f} s")
-    for r in clean_rows:
+          _pct(r["robust_false_rejected"]), _fmt_s(r["robust_s"])] for r in rows])
+
+
+def _method_table(rows, key: str, title: str) -> str:
+    return format_table(["dataset", title, "err/scale", "precision", "recall", "false rej. %", "s"],
+                        [[r["dataset"], r[key], f"{r['err_ratio']:.3g}", f"{r['precision']:.3f}",
+                          f"{r['recall']:.3f}", _pct(r["false_rejected"]), _fmt_s(r["s"])] for r in rows])
+
+
+def _report(args, tables: dict[str, str], fractions, skipped, total: float) -> str:
+    """The text the benchmark prints (markdown)."""
+    parts = ["## Clean graphs (times are medians of --repeat runs; iSAM2 on > 5000 nodes: one run)\n\n"
+             + tables["clean"],
+             f"## Injected false loops (seed {args.seed}); err = ATE vs the clean solution, scale as in column "
+             "'error scale'; target err/scale <= 0.05\n\n" + tables["outliers"]]
+    if tables["compare_rows"]:
+        parts.append(f"## Robust methods on the same injected loops ({int(round(100 * max(fractions)))} %)\n\n"
+                     + tables["compare"])
+    if tables["probability_rows"]:
+        parts.append("## Loop probability (as many false loops as true; p true ~ U(0.5, 1), false ~ U(0.2, 0.9))"
+                     "\n\n" + tables["probability"])
+    parts += [f"skipped {s}" for s in skipped]
+    return "\n\n".join(parts + [f"total {total:.0f} s"])
+
+
+def run(args: argparse.Namespace) -> BenchResult:
+    datasets, fractions, repeat, compare = _selection(args)
+    t_start = time.perf_counter()
+    rows = _measure(args, datasets, fractions, repeat, compare)
+    total = time.perf_counter() - t_start
+    tables = {"clean": _clean_table(rows["clean"]), "outliers": _outlier_table(rows["outliers"]),
+              "compare": _method_table(rows["compare"], "method", "method"),
+              "probability": _method_table(rows["probability"], "weighting", "P(loop) weighting")}
+    text = _report(args, {**tables, "compare_rows": rows["compare"], "probability_rows": rows["probability"]},
+                   fractions, rows["skipped"], total)
+    print(text)
+    for r in rows["clean"]:
         r.pop("_clean_poses", None)
     write_json(args.out, {"benchmark": "graph", "seed": args.seed, "fractions": fractions, "repeat": repeat,
-                          "quick": args.quick, "total_seconds": total, "skipped": skipped, "clean": clean_rows,
-                          "outliers": out_rows, "compare": cmp_rows, "probability": prob_rows,
-                          "tables": {"clean": t1, "outliers": t2, "compare": t3, "probability": t4}})
+                          "quick": args.quick, "total_seconds": total, "skipped": rows["skipped"],
+                          "clean": rows["clean"], "outliers": rows["outliers"], "compare": rows["compare"],
+                          "probability": rows["probability"], "tables": tables})
     print(f"wrote {args.out}")
-    return 0
+    # docs/benchmarks.md: without the run time, headings one level below the document's sections
+    docs = text.rsplit("\n\ntotal ", 1)[0]
+    return BenchResult("\n".join("#" + line if line.startswith("## ") else line for line in docs.split("\n")))

@@ -15,134 +15,28 @@ from __future__ import annotations
 import argparse
 import csv
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
-NAME = "horizon"
-HELP = "1D SURF horizon landmarks vs SIFT: ROC/AUC on a KITTI crop bank, extraction and matching time"
+from loops.curves import auc, roc_curve, tpr_at_fpr
+from loops.horizon import HorizonParams, extract_features, match, nn_matches
+from loops.horizon.pairs_file import SCORE_COLUMNS, score_pairs_file
+from odometry.shared.atomic_io import atomic_path, atomic_write_text
+from vslam.app.horizon import horizon_params
+from vslam.bench.horizon_bank import SNIPPETS, Bank, build_bank, load_crops
+from vslam.bench.results import BenchResult, write_json
+from vslam.evaluation.plots import plot_roc_curves
+from vslam.evaluation.tables import format_table
+from vslam.paths import shared_data_dir
 
-SNIPPETS = ("KITTI_sequence_1_kitti06_f0000-0050", "KITTI_sequence_2_unidentified_seq00-02calib")
 # KITTI pairs from ../shared/data/pairs where a horizon row makes sense (the level car camera, row = cy).
 # The other pairs there are hand-held / tilted views (TUM office) or planar and object scenes (graf, churchill,
 # box, mars, ship, bicycle, SOH, kn_church) that have no horizon to read.
 KITTI_PAIR_ROW = 183  # cy = 183.1 for KITTI 06 (calibration in kitti_snippets)
-
-
-@dataclass(frozen=True)
-class View:
-    snippet: int        # index into SNIPPETS
-    frame: int
-    offset: int         # crop's first column in the full frame
-    path: Path
-    row: int            # horizon row (the principal point row cy, rounded: the KITTI camera is level)
-    heading_deg: float  # world heading of the crop centre's ray
-    position: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class Bank:
-    views: list[View]
-    pairs: np.ndarray       # (P, 2) view indices
-    labels: np.ndarray      # (P,) bool: matched
-    kind: np.ndarray        # (P,) str: rotation | rotation+translation | unmatched-same-drive | unmatched-other-drive
-    crop: int
-
-
-def read_kitti_snippet(folder: Path) -> tuple[dict, np.ndarray, list[Path]]:
-    """(calibration {fx, cx, cy}, (N, 3, 4) camera poses, image paths) of a kitti_snippets folder, via the
-    toolkit's KITTI reader."""
-    from odometry.shared.tum import tum_to_se3_matrices
-    from vslam.io import read_kitti
-
-    seq = read_kitti(folder)
-    if seq.groundtruth is None:
-        raise ValueError(f"{folder}: no poses.txt (the bank needs ground-truth headings)")
-    poses = tum_to_se3_matrices(seq.groundtruth.poses)[:, :3, :]
-    cam = seq.camera
-    return {"fx": cam.fx, "cx": cam.cx, "cy": cam.cy}, poses, [seq.images.path(i) for i in range(len(seq))]
-
-
-def _ray_heading(rotation: np.ndarray, u: float, fx: float, cx: float) -> float:
-    # KITTI camera: x right, y down, z forward. Heading of the ray through column u, on the ground plane (x-z).
-    d = rotation @ np.array([(u - cx) / fx, 0.0, 1.0])
-    return float(np.degrees(np.arctan2(d[0], d[2])))
-
-
-def build_bank(data_dir: Path, frame_step: int = 2, n_offsets: int = 12, crop: int = 640, match_deg: float = 20.0,
-               max_baseline: float = 2.5, n_matched: int = 480, n_unmatched: int = 2065, seed: int = 0) -> Bank:
-    """The classification bank (deterministic for a seed).
-
-    Views: frames 0, frame_step, ... of each snippet; in each, n_offsets crops of `crop` px at offsets
-    round(linspace(0, W - crop, n_offsets)) (about 4.3 degrees apart, like the paper's 4-degree turns).
-    Labels: matched when the crop-centre rays differ by < match_deg in heading and the camera centres are at most
-    max_baseline metres apart (same frame: pure rotation, the paper's protocol; nearby frames: rotation plus
-    translation, i.e. scale change); unmatched when the headings differ by >= match_deg (same drive, any distance)
-    or the views come from different drives. Same-drive pairs within match_deg but further apart than max_baseline
-    are left out: a heading label only says "same landmark" when the landmarks are far compared to the baseline.
-    Then n_matched / n_unmatched pairs are drawn without replacement (the paper's 480 and 2,065), the unmatched
-    ones 3:1 from the same drive. Each draw has its own random stream, so banks that differ only in
-    max_baseline share their unmatched pairs.
-    """
-    root = data_dir / "places" / "kitti_snippets"
-    views: list[View] = []
-    for si, name in enumerate(SNIPPETS):
-        calib, poses, images = read_kitti_snippet(root / name)
-        import cv2
-
-        first = cv2.imread(str(images[0]), cv2.IMREAD_GRAYSCALE)
-        if first is None:
-            raise OSError(f"{images[0]}: cannot read image")
-        offsets = np.rint(np.linspace(0, first.shape[1] - crop, n_offsets)).astype(int)
-        row = int(round(calib["cy"]))
-        for f in range(0, len(images), frame_step):
-            r, t = poses[f, :, :3], poses[f, :, 3]
-            for o in offsets:
-                heading = _ray_heading(r, o + (crop - 1) / 2.0, calib["fx"], calib["cx"])
-                views.append(View(si, f, int(o), images[f], row, heading, tuple(float(v) for v in t)))
-
-    snip = np.array([v.snippet for v in views])
-    head = np.array([v.heading_deg for v in views])
-    pos = np.array([v.position for v in views])
-    frame = np.array([v.frame for v in views])
-    i, j = np.triu_indices(len(views), 1)
-    same = snip[i] == snip[j]
-    dh = np.abs((head[i] - head[j] + 180.0) % 360.0 - 180.0)
-    base = np.linalg.norm(pos[i] - pos[j], axis=1)
-    matched = same & (dh < match_deg) & (base <= max_baseline)
-    unmatched_same = same & (dh >= match_deg)
-    other = ~same
-
-    def draw(mask: np.ndarray, k: int, stream: int) -> np.ndarray:
-        idx = np.flatnonzero(mask)
-        rng = np.random.default_rng([seed, stream])
-        return np.sort(rng.choice(idx, size=min(k, idx.size), replace=False))
-
-    pick_m = draw(matched, n_matched, 1)
-    n_same = min(int(round(0.75 * n_unmatched)), int(unmatched_same.sum()))
-    pick_u = draw(unmatched_same, n_same, 2)
-    pick_o = draw(other, n_unmatched - n_same, 3)
-    sel = np.r_[pick_m, pick_u, pick_o]
-    kind = np.r_[np.where(frame[i[pick_m]] == frame[j[pick_m]], "rotation", "rotation+translation"),
-                 np.full(pick_u.size, "unmatched-same-drive"), np.full(pick_o.size, "unmatched-other-drive")]
-    labels = np.r_[np.ones(pick_m.size, bool), np.zeros(pick_u.size + pick_o.size, bool)]
-    return Bank(views, np.stack([i[sel], j[sel]], axis=1), labels, kind, crop)
-
-
-def _load_crops(bank: Bank) -> list[np.ndarray]:
-    import cv2
-
-    cache: dict[Path, np.ndarray] = {}
-    crops = []
-    for v in bank.views:
-        if v.path not in cache:
-            img = cv2.imread(str(v.path), cv2.IMREAD_GRAYSCALE)
-            if img is None:
-                raise OSError(f"{v.path}: cannot read image")
-            cache[v.path] = img
-        crops.append(np.ascontiguousarray(cache[v.path][:, v.offset:v.offset + bank.crop]))
-    return crops
+SIFT = "SIFT (full image), NN"
+NN, NN_RANSAC = "1D SURF, NN", "1D SURF, NN+RANSAC"
 
 
 def _median_us(xs: list[float]) -> float:
@@ -152,8 +46,6 @@ def _median_us(xs: list[float]) -> float:
 def time_horizon(crops, rows, pairs, params, repeat: int) -> tuple[list[float], list[float], list[float]]:
     """Per-call seconds of 1D SURF extraction (every view), matching and NN-only matching (every pair), over
     `repeat` rounds; in-process, one call at a time, so the medians are per-call times."""
-    from loops.horizon import extract_features, match, nn_matches
-
     feats = [extract_features(c, r, params) for c, r in zip(crops, rows)]
     for f in feats:
         f.keys  # matching keys are built once per feature set (at memorise time for stored landmarks)
@@ -182,8 +74,6 @@ class SiftReference:
     reference (OpenCV's plain wheel has no SURF). Features are computed once per view, timed."""
 
     def __init__(self, crops, n_features: int, ratio: float):
-        import cv2
-
         self.crops, self.ratio = crops, ratio
         self.sift = cv2.SIFT_create(nfeatures=n_features)
         self.bf = cv2.BFMatcher(cv2.NORM_L2)
@@ -220,8 +110,6 @@ class SiftReference:
 
 def _kitti_pairs_csv(data_dir: Path, out_csv: Path) -> Path:
     """The KITTI pairs of ../shared/data/pairs as a PAIRS.csv (a, b, row_a, row_b, label) for `vslam horizon pairs`."""
-    from odometry.shared.atomic_io import atomic_write_text
-
     pairs_dir = data_dir / "pairs"
     lines = ["a,b,row_a,row_b,label"]
     for ln in (pairs_dir / "pairs.txt").read_text().splitlines():
@@ -257,125 +145,103 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _auc_or_nan(scores, labels) -> float:
-    from loops.curves import auc
-
     y = np.asarray(labels, bool)
     return auc(scores, y) if y.any() and not y.all() else float("nan")
 
 
-def run(args: argparse.Namespace) -> int:
-    import cv2
-
-    from loops.curves import roc_curve, tpr_at_fpr
-    from loops.horizon import HorizonParams, extract_features, match
-    from odometry.shared.atomic_io import atomic_path
-    from vslam.bench._common import format_table, write_json
-    from vslam.cli.cmd_horizon import parse_overrides, score_pairs_file, write_roc_png
-    from vslam.paths import shared_data_dir
-
-    data_dir = shared_data_dir(required=True)
-    params = parse_overrides(HorizonParams.preset(args.preset), args.overrides)
-    cv2.setNumThreads(max(1, args.threads))
+# ---------------------------------------------------------------------------------------------------- stages
+def _banks(args: argparse.Namespace, data_dir: Path) -> dict[float, Bank]:
+    """A bank per max baseline of the sweep (and of --max-baseline); they share views and unmatched pairs."""
     n_m, n_u = (120, 500) if args.quick else (480, 2065)
     try:
         sweep = sorted({float(b) for b in args.sweep.split(",") if b.strip()} | {args.max_baseline})
     except ValueError:
         raise ValueError(f"--sweep: expected comma-separated numbers, got {args.sweep!r}") from None
-    banks = {b: build_bank(data_dir, max_baseline=b, n_matched=n_m, n_unmatched=n_u, seed=args.seed) for b in sweep}
-    bank = banks[args.max_baseline]
-    crops = _load_crops(bank)
-    rows = [v.row for v in bank.views]
-    y = bank.labels
-    print(f"bank: {len(bank.views)} views (640-px crops of {len(bank.views) // 12} KITTI frames), "
-          f"{int(y.sum())} matched / {int((~y).sum())} unmatched pairs, max baseline {args.max_baseline:g} m",
-          flush=True)
+    return {b: build_bank(data_dir, max_baseline=b, n_matched=n_m, n_unmatched=n_u, seed=args.seed) for b in sweep}
 
-    # Scores: every pair of every bank (the banks share views and unmatched pairs).
-    feats = [extract_features(c, r, params) for c, r in zip(crops, rows)]
-    union = sorted({(int(a), int(b)) for bk in banks.values() for a, b in bk.pairs})
-    res = {(a, b): match(feats[b], feats[a], params) for a, b in union}
+
+def _other_presets(params: HorizonParams, crops, rows, bank: Bank) -> dict[str, float]:
+    """NN+RANSAC AUC of the paper / robust presets that differ from the parameters used."""
     compare = {name: p for name, p in (("paper", HorizonParams.preset("paper")),
                                        ("robust", HorizonParams.preset("robust"))) if p != params}
-    compare_auc = {}
+    out = {}
     for name, p in compare.items():
         fs = [extract_features(c, r, p) for c, r in zip(crops, rows)]
-        compare_auc[name] = _auc_or_nan([match(fs[b], fs[a], p).score_ransac for a, b in bank.pairs], y)
+        out[name] = _auc_or_nan([match(fs[b], fs[a], p).score_ransac for a, b in bank.pairs], bank.labels)
+    return out
 
-    print(f"timing 1D SURF ({args.repeat} rounds) ...", flush=True)
-    t_ext, t_match, t_nn = time_horizon(crops, rows, bank.pairs, params, args.repeat)
 
-    def scores_for(bk: Bank) -> dict[str, np.ndarray]:
-        out = {}
-        if sift is not None:
-            out["SIFT (full image), NN"] = np.array([sift.score(int(a), int(b)) for a, b in bk.pairs])
-        out["1D SURF, NN"] = np.array([res[(int(a), int(b))].score for a, b in bk.pairs])
-        out["1D SURF, NN+RANSAC"] = np.array([res[(int(a), int(b))].score_ransac for a, b in bk.pairs])
-        return out
-
-    sift = None
-    if not args.no_sift:
-        print(f"SIFT reference on {len(union)} pairs ...", flush=True)
-        sift = SiftReference(crops, args.sift_features, params.ratio)
-        for a, b in union:
-            sift.score(a, b)
-    scorers = scores_for(bank)
-    aucs = {k: _auc_or_nan(s, y) for k, s in scorers.items()}
-
-    ext = {"1D SURF, NN": _median_us(t_ext), "1D SURF, NN+RANSAC": _median_us(t_ext)}
-    mat = {"1D SURF, NN": _median_us(t_nn), "1D SURF, NN+RANSAC": _median_us(t_match)}
-    nfeat = {"1D SURF, NN": float(np.mean([len(f) for f in feats]))}
-    nfeat["1D SURF, NN+RANSAC"] = nfeat["1D SURF, NN"]
+def _scores(bank: Bank, res: dict, sift: SiftReference | None) -> dict[str, np.ndarray]:
+    """Each scorer's score of every pair of a bank."""
+    out = {}
     if sift is not None:
-        ext["SIFT (full image), NN"] = _median_us(sift.t_ext)
-        mat["SIFT (full image), NN"] = _median_us(sift.t_match)
-        nfeat["SIFT (full image), NN"] = sift.mean_features
-    sift_ext = ext.get("SIFT (full image), NN", float("nan"))
-    sift_mat = mat.get("SIFT (full image), NN", float("nan"))
+        out[SIFT] = np.array([sift.score(int(a), int(b)) for a, b in bank.pairs])
+    out[NN] = np.array([res[(int(a), int(b))].score for a, b in bank.pairs])
+    out[NN_RANSAC] = np.array([res[(int(a), int(b))].score_ransac for a, b in bank.pairs])
+    return out
+
+
+def _speed(t_ext, t_match, t_nn, feats, sift: SiftReference | None) -> tuple[dict, dict, dict]:
+    """Median extraction and matching microseconds and mean features per view, per scorer."""
+    ext = {NN: _median_us(t_ext), NN_RANSAC: _median_us(t_ext)}
+    mat = {NN: _median_us(t_nn), NN_RANSAC: _median_us(t_match)}
+    nfeat = {NN: float(np.mean([len(f) for f in feats]))}
+    nfeat[NN_RANSAC] = nfeat[NN]
+    if sift is not None:
+        ext[SIFT] = _median_us(sift.t_ext)
+        mat[SIFT] = _median_us(sift.t_match)
+        nfeat[SIFT] = sift.mean_features
+    return ext, mat, nfeat
+
+
+def _main_table(bank: Bank, scorers: dict, aucs: dict, ext, mat, nfeat) -> tuple[str, dict]:
+    """The speed / AUC table of the main bank, and the AUCs on rotation-only and rotation+translation matches."""
+    y = bank.labels
     subsets = {}
     for kind in ("rotation", "rotation+translation"):
         keep = (bank.kind == kind) | ~y
         subsets[kind] = {k: _auc_or_nan(s[keep], y[keep]) for k, s in scorers.items()}
-    table_rows = [[k, nfeat[k], ext[k] / 1e3, mat[k] / 1e3, sift_ext / ext[k], sift_mat / mat[k], aucs[k],
-                   subsets["rotation"][k], subsets["rotation+translation"][k]] for k in scorers]
+    sift_ext, sift_mat = ext.get(SIFT, float("nan")), mat.get(SIFT, float("nan"))
+    rows = [[k, nfeat[k], ext[k] / 1e3, mat[k] / 1e3, sift_ext / ext[k], sift_mat / mat[k], aucs[k],
+             subsets["rotation"][k], subsets["rotation+translation"][k]] for k in scorers]
     table = format_table(["method", "features / view", "extraction ms", "matching ms", "SIFT / this, extraction",
                           "SIFT / this, matching", "AUC", "AUC, rotation-only matches",
-                          "AUC, rotation+translation matches"], table_rows, floatfmt=".4g")
+                          "AUC, rotation+translation matches"], rows, floatfmt=".4g")
+    return table, subsets
 
-    sweep_rows, sweep_json = [], {}
+
+def _sweep(banks: dict[float, Bank], res: dict, sift, scorer_names) -> tuple[str, dict]:
+    """AUC per scorer for each max baseline."""
+    rows, out = [], {}
     for b, bk in banks.items():
-        sc = scores_for(bk)
+        sc = _scores(bk, res, sift)
         a = {k: _auc_or_nan(s, bk.labels) for k, s in sc.items()}
         n_rot = int((bk.kind == "rotation").sum())
         n_tr = int((bk.kind == "rotation+translation").sum())
-        sweep_rows.append([f"{b:g}", f"{n_rot} / {n_tr}", *[a[k] for k in sc]])
-        sweep_json[f"{b:g}"] = {"matched_rotation": n_rot, "matched_rotation_translation": n_tr, "auc": a}
-    sweep_table = format_table(["max baseline m", "matched: rotation / rot.+transl.", *scorers], sweep_rows,
-                               floatfmt=".3f")
+        rows.append([f"{b:g}", f"{n_rot} / {n_tr}", *[a[k] for k in sc]])
+        out[f"{b:g}"] = {"matched_rotation": n_rot, "matched_rotation_translation": n_tr, "auc": a}
+    return format_table(["max baseline m", "matched: rotation / rot.+transl.", *scorer_names], rows,
+                        floatfmt=".3f"), out
 
+
+def _by_drive(bank: Bank, scorers: dict) -> dict[str, dict]:
+    """AUC per scorer over the pairs within each drive."""
     snip_a = np.array([bank.views[a].snippet for a, _ in bank.pairs])
     snip_b = np.array([bank.views[b].snippet for _, b in bank.pairs])
-    by_drive = {}
+    out = {}
     for si, name in enumerate(SNIPPETS):
         keep = (snip_a == si) & (snip_b == si)
-        by_drive[name] = {k: _auc_or_nan(s[keep], y[keep]) for k, s in scorers.items()}
+        out[name] = {k: _auc_or_nan(s[keep], bank.labels[keep]) for k, s in scorers.items()}
+    return out
 
-    print(table)
-    print()
-    print(sweep_table)
-    for name, d in by_drive.items():
-        print(f"{name} (pairs within the drive): " + ", ".join(f"{k} AUC {v:.3f}" for k, v in d.items()))
-    for name, a in compare_auc.items():
-        print(f"preset {name!r}: NN+RANSAC AUC {a:.3f}")
-    tpr5, thr5 = tpr_at_fpr(scorers["1D SURF, NN+RANSAC"], y, 0.05)
-    print(f"NN+RANSAC at <= 5% false positives: {tpr5:.1%} of matched pairs, score threshold {thr5:.1f}")
 
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_roc_png(args.out / "roc.png", {k: (*roc_curve(s, y)[:2], aucs[k]) for k, s in scorers.items()},
-             f"KITTI crop bank: {int(y.sum())} matched / {int((~y).sum())} unmatched pairs")
-    with atomic_path(args.out / "bank_scores.csv") as tmp, open(tmp, "w", newline="") as fh:
+def _write_bank_scores(path: Path, bank: Bank, res: dict, scorers: dict) -> None:
+    """Every pair of the main bank with its label, kind, geometry and scores, as CSV."""
+    y, has_sift = bank.labels, SIFT in scorers
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["a", "b", "row_a", "row_b", "label", "kind", "heading_diff_deg", "baseline_m", *SCORE_NAMES,
-                    *(["score_sift"] if sift is not None else [])])
+        w.writerow(["a", "b", "row_a", "row_b", "label", "kind", "heading_diff_deg", "baseline_m", *SCORE_COLUMNS,
+                    *(["score_sift"] if has_sift else [])])
         for p, (a, b) in enumerate(bank.pairs):
             va, vb, r = bank.views[a], bank.views[b], res[(int(a), int(b))]
             dh = abs((va.heading_deg - vb.heading_deg + 180) % 360 - 180)
@@ -384,19 +250,76 @@ def run(args: argparse.Namespace) -> int:
                     f"{SNIPPETS[vb.snippet]}/{vb.path.name}@{vb.offset}", va.row, vb.row, int(y[p]), bank.kind[p],
                     f"{dh:.2f}", f"{base:.2f}", f"{r.score:.4f}", f"{r.score_ransac:.4f}", f"{r.b_s:.5f}",
                     f"{r.b_d:.3f}"]
-            if sift is not None:
-                line.append(f"{scorers['SIFT (full image), NN'][p]:.5f}")
+            if has_sift:
+                line.append(f"{scorers[SIFT][p]:.5f}")
             w.writerow(line)
 
-    # The real KITTI pairs of ../shared/data/pairs, through the same code path as `vslam horizon pairs`.
-    pairs_csv = _kitti_pairs_csv(data_dir, args.out / "kitti_pairs.csv")
-    scored = score_pairs_file(pairs_csv, args.out / "kitti_pairs_scores.csv", params)
+
+def _kitti_pairs(data_dir: Path, out: Path, params: HorizonParams) -> tuple[list[dict], dict, str]:
+    """The real KITTI pairs of ../shared/data/pairs, through the same code path as `vslam horizon pairs`."""
+    pairs_csv = _kitti_pairs_csv(data_dir, out / "kitti_pairs.csv")
+    scored = score_pairs_file(pairs_csv, out / "kitti_pairs_scores.csv", params)
     lab = np.array([int(r["label"]) for r in scored])
-    pair_auc = {"1D SURF, NN": _auc_or_nan([r["score"] for r in scored], lab),
-                "1D SURF, NN+RANSAC": _auc_or_nan([r["score_ransac"] for r in scored], lab)}
-    print(f"KITTI pairs of ../shared/data/pairs ({int(lab.sum())} same place / {int((lab == 0).sum())} "
-          f"different place, full 1226-px frames, row {KITTI_PAIR_ROW}): AUC NN {pair_auc['1D SURF, NN']:.3f}, "
-          f"NN+RANSAC {pair_auc['1D SURF, NN+RANSAC']:.3f}")
+    pair_auc = {NN: _auc_or_nan([r["score"] for r in scored], lab),
+                NN_RANSAC: _auc_or_nan([r["score_ransac"] for r in scored], lab)}
+    line = (f"KITTI pairs of ../shared/data/pairs ({int(lab.sum())} same place / {int((lab == 0).sum())} "
+            f"different place, full 1226-px frames, row {KITTI_PAIR_ROW}): AUC NN {pair_auc[NN]:.3f}, "
+            f"NN+RANSAC {pair_auc[NN_RANSAC]:.3f}")
+    return scored, pair_auc, line
+
+
+# ---------------------------------------------------------------------------------------------------- the run
+def _measure(args: argparse.Namespace, params: HorizonParams, banks: dict[float, Bank]) -> dict:
+    """Scores of every pair of every bank, the other presets' AUC, the timings and the SIFT reference."""
+    bank = banks[args.max_baseline]
+    crops = load_crops(bank)
+    rows = [v.row for v in bank.views]
+    y = bank.labels
+    print(f"bank: {len(bank.views)} views (640-px crops of {len(bank.views) // 12} KITTI frames), "
+          f"{int(y.sum())} matched / {int((~y).sum())} unmatched pairs, max baseline {args.max_baseline:g} m",
+          flush=True)
+    feats = [extract_features(c, r, params) for c, r in zip(crops, rows)]
+    union = sorted({(int(a), int(b)) for bk in banks.values() for a, b in bk.pairs})
+    res = {(a, b): match(feats[b], feats[a], params) for a, b in union}
+    compare_auc = _other_presets(params, crops, rows, bank)
+    print(f"timing 1D SURF ({args.repeat} rounds) ...", flush=True)
+    timing = time_horizon(crops, rows, bank.pairs, params, args.repeat)
+    sift = None
+    if not args.no_sift:
+        print(f"SIFT reference on {len(union)} pairs ...", flush=True)
+        sift = SiftReference(crops, args.sift_features, params.ratio)
+        for a, b in union:
+            sift.score(a, b)
+    return {"bank": bank, "feats": feats, "res": res, "compare_auc": compare_auc, "timing": timing, "sift": sift}
+
+
+def run(args: argparse.Namespace) -> BenchResult:
+    data_dir = shared_data_dir(required=True)
+    params = horizon_params(args.preset, args.overrides)
+    cv2.setNumThreads(max(1, args.threads))
+    banks = _banks(args, data_dir)
+    m = _measure(args, params, banks)
+    bank, res, sift, (t_ext, t_match, t_nn) = m["bank"], m["res"], m["sift"], m["timing"]
+    y = bank.labels
+    scorers = _scores(bank, res, sift)
+    aucs = {k: _auc_or_nan(s, y) for k, s in scorers.items()}
+    ext, mat, nfeat = _speed(t_ext, t_match, t_nn, m["feats"], sift)
+    table, subsets = _main_table(bank, scorers, aucs, ext, mat, nfeat)
+    sweep_table, sweep_json = _sweep(banks, res, sift, list(scorers))
+    by_drive = _by_drive(bank, scorers)
+    tpr5, thr5 = tpr_at_fpr(scorers[NN_RANSAC], y, 0.05)
+    lines = ([f"{name} (pairs within the drive): " + ", ".join(f"{k} AUC {v:.3f}" for k, v in d.items())
+              for name, d in by_drive.items()]
+             + [f"preset {name!r}: NN+RANSAC AUC {a:.3f}" for name, a in m["compare_auc"].items()]
+             + [f"NN+RANSAC at <= 5% false positives: {tpr5:.1%} of matched pairs, score threshold {thr5:.1f}"])
+    print(f"{table}\n\n{sweep_table}\n" + "\n".join(lines))
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    plot_roc_curves(args.out / "roc.png", {k: (*roc_curve(s, y)[:2], aucs[k]) for k, s in scorers.items()},
+                    f"KITTI crop bank: {int(y.sum())} matched / {int((~y).sum())} unmatched pairs")
+    _write_bank_scores(args.out / "bank_scores.csv", bank, res, scorers)
+    scored, pair_auc, kitti_line = _kitti_pairs(data_dir, args.out, params)
+    print(kitti_line)
 
     write_json(args.out / "horizon.json", {
         "benchmark": "horizon",
@@ -407,7 +330,7 @@ def run(args: argparse.Namespace) -> int:
                  "snippets": list(SNIPPETS), "crop": bank.crop, "max_baseline_m": args.max_baseline,
                  "horizon_rows": sorted({v.row for v in bank.views})},
         "auc": aucs, "auc_by_subset": subsets, "auc_by_drive": by_drive, "auc_sweep": sweep_json,
-        "auc_other_presets": compare_auc,
+        "auc_other_presets": m["compare_auc"],
         "extraction_us_median": ext, "matching_us_median": mat, "mean_features": nfeat,
         "timing_calls": {"extraction": len(t_ext), "matching": len(t_match), "nn_only": len(t_nn),
                          "sift_extraction": len(sift.t_ext) if sift else 0,
@@ -418,10 +341,7 @@ def run(args: argparse.Namespace) -> int:
         "table": table, "sweep_table": sweep_table,
     })
     print(f"wrote {args.out / 'horizon.json'}, {args.out / 'roc.png'}, {args.out / 'bank_scores.csv'}")
-    return 0
-
-
-SCORE_NAMES = ("score", "score_ransac", "b_s", "b_d")
+    return BenchResult(f"{table}\n\n{sweep_table}\n\n" + "\n\n".join(lines + [kitti_line]))
 
 
 def _argv_echo(args: argparse.Namespace) -> list[str]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import resource
 import subprocess
 import sys
 import time
@@ -17,8 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-NAME = "pipeline"
-HELP = "end-to-end SLAM frames/s, accuracy (ATE, start-to-end) and peak memory on simulated sequences"
+from vslam.bench.results import BenchResult, write_json
+from vslam.bench.timing import median
+from vslam.evaluation.run_eval import evaluate_result
+from vslam.evaluation.tables import format_table
+from vslam.io import open_sequence
+from vslam.pipeline import Pipeline, PipelineConfig
+from vslam.recording import RunRecorder
+from vslam.sim import SimConfig, simulate
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,8 +42,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _sequence(cache: Path, frames: int, length: float, floor: str, seed: int) -> Path:
-    from vslam.sim import SimConfig, simulate
-
     fps = 20.0
     speed = length / (frames / fps - 4.0)      # the run takes about `frames` frames, with ramps and pauses
     cfg = SimConfig(floor=floor, length=length, speed=speed, fps=fps, seed=seed, max_frames=frames)
@@ -49,6 +54,14 @@ def _sequence(cache: Path, frames: int, length: float, floor: str, seed: int) ->
     return path
 
 
+def _configs(mode: int):
+    """(full SLAM with recording, VO only without recording) at descriptor `mode`."""
+    base = PipelineConfig()
+    full = replace(base, loops=replace(base.loops, mode=mode))
+    no_rec = replace(full, recording=replace(full.recording, enabled=False))
+    return full, replace(no_rec, loops=replace(no_rec.loops, enabled=False))
+
+
 def _decode_only(seq) -> float:
     t0 = time.perf_counter()
     for i in range(len(seq)):
@@ -57,9 +70,6 @@ def _decode_only(seq) -> float:
 
 
 def _run(seq, cfg, out: Path | None, record: bool):
-    from vslam.pipeline import Pipeline
-    from vslam.recording import RunRecorder
-
     rec = RunRecorder(out / "recording.rrd", seq.camera) if record else None
     res = Pipeline(cfg, recorder=rec).run(seq)
     if rec is not None:
@@ -68,9 +78,7 @@ def _run(seq, cfg, out: Path | None, record: bool):
 
 
 def _accuracy(res, seq) -> dict:
-    from vslam.pipeline.outputs import _evaluate
-
-    ev = _evaluate(res, seq)
+    ev = evaluate_result(res, seq)
     out = {}
     for k in ("vo", "slam"):
         d = ev[k]
@@ -85,16 +93,11 @@ def _accuracy(res, seq) -> dict:
 
 def _child(args) -> int:
     """Run the full pipeline on one sequence and print its peak RSS (the parent reads it)."""
-    import resource
-
-    from vslam.io import open_sequence
-    from vslam.pipeline import PipelineConfig
-
     seq = open_sequence(args._child)
-    cfg = replace(PipelineConfig(), loops=replace(PipelineConfig().loops, mode=args.mode))
+    full, _ = _configs(args.mode)
     out = Path(args.out) / "memory_run"
     out.mkdir(parents=True, exist_ok=True)
-    res = _run(seq, cfg, out, record=True)
+    res = _run(seq, full, out, record=True)
     res.write(out, sequence=seq, plots=False)
     peak_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     print(json.dumps({"frames": len(seq), "peak_rss_mb": peak_kb / 1024, "seconds": res.wall_seconds}))
@@ -110,69 +113,84 @@ def _peak_memory(seq_path: Path, args) -> dict:
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
-def run(args: argparse.Namespace) -> int:
-    if args._child:
-        return _child(args)
-    from vslam.bench._common import format_table, median, write_json
-    from vslam.io import open_sequence
-    from vslam.pipeline import PipelineConfig
+def _memory(args, seq_path: Path, cache: Path) -> dict:
+    """Peak memory of the full pipeline on this sequence and on a --memory-frames one, each in a child process."""
+    if args.memory_frames <= 0:
+        return {}
+    mem_short = _peak_memory(seq_path, args)
+    long_len = args.length * args.memory_frames / args.frames
+    mem_long = _peak_memory(_sequence(cache, args.memory_frames, long_len, args.floor, args.seed + 1), args)
+    return {"short": mem_short, "long": mem_long,
+            "ratio_long_over_short": mem_long["peak_rss_mb"] / mem_short["peak_rss_mb"]}
 
-    if args.quick:
-        args.frames, args.length, args.runs, args.memory_frames = 300, 15.0, 1, 1000
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    cache = out / "sequences"
-    seq_path = _sequence(cache, args.frames, args.length, args.floor, args.seed)
-    seq = open_sequence(seq_path)
-    base = PipelineConfig()
-    full = replace(base, loops=replace(base.loops, mode=args.mode))
-    no_rec = replace(full, recording=replace(full.recording, enabled=False))
-    vo_only = replace(no_rec, loops=replace(no_rec.loops, enabled=False))
 
+def _speed(seq, out: Path, runs: int, mode: int) -> dict:
+    """Frames/s of decoding alone, of VO only and of the full pipeline (`runs` times); the last full result."""
+    full, vo_only = _configs(mode)
     decode_fps = _decode_only(seq)
     t0 = time.perf_counter()
     vo_res = _run(seq, vo_only, None, record=False)
     vo_fps = len(seq) / (time.perf_counter() - t0)
     full_fps, last = [], None
-    for k in range(args.runs):
+    for k in range(runs):
         rdir = out / f"run{k}"
         rdir.mkdir(exist_ok=True)
         t0 = time.perf_counter()
         last = _run(seq, full, rdir, record=True)
         full_fps.append(len(seq) / (time.perf_counter() - t0))
+    return {"decode_fps": decode_fps, "vo_fps": vo_fps, "vo_result": vo_res, "full_fps": full_fps, "last": last}
+
+
+def _table(args, sp: dict, acc: dict, acc_vo_only: dict) -> str:
+    loops = acc.get("loops", {})
+    rows = [["decode only (baseline)", f"{sp['decode_fps']:.0f}", "-", "-", "-"],
+            ["VO only, no recording (baseline)", f"{sp['vo_fps']:.1f}", f"{acc_vo_only['ate_percent_of_path']:.3f}",
+             f"{acc_vo_only['start_to_end_error_m'] * 100:.2f}", "-"],
+            [f"full SLAM, mode {args.mode}, recording on (median of {args.runs})", f"{median(sp['full_fps']):.1f}",
+             f"{acc['slam']['ate_percent_of_path']:.3f}", f"{acc['slam']['start_to_end_error_m'] * 100:.2f}",
+             f"{loops.get('precision', float('nan')):.3f} / {loops.get('recall', float('nan')):.3f}"]]
+    return format_table(["configuration", "frames/s", "ATE % of path", "start-to-end error (cm)",
+                         "loop precision / recall"], rows)
+
+
+def _notes(sp: dict, acc: dict, acc_vo_only: dict, comp: dict, mem: dict) -> list[str]:
+    lines = [f"full pipeline / VO only speed: {median(sp['full_fps']) / sp['vo_fps']:.2f}; VO-only ATE "
+             f"{acc_vo_only['ate_rmse_m']:.3f} m vs SLAM {acc['slam']['ate_rmse_m']:.3f} m",
+             "mean ms per frame: " + ", ".join(f"{k} {v:.2f}" for k, v in comp.items())]
+    if mem:
+        lines.append(f"peak memory: {mem['short']['peak_rss_mb']:.0f} MB at {mem['short']['frames']} frames, "
+                     f"{mem['long']['peak_rss_mb']:.0f} MB at {mem['long']['frames']} frames "
+                     f"(ratio {mem['ratio_long_over_short']:.2f})")
+    return lines
+
+
+def run(args: argparse.Namespace) -> BenchResult:
+    if args._child:
+        return BenchResult(exit_code=_child(args))
+    if args.quick:
+        args.frames, args.length, args.runs, args.memory_frames = 300, 15.0, 1, 1000
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    seq_path = _sequence(out / "sequences", args.frames, args.length, args.floor, args.seed)
+    seq = open_sequence(seq_path)
+    sp = _speed(seq, out, args.runs, args.mode)
+    last = sp["last"]
     last.write(out / "run0", sequence=seq)
     acc = _accuracy(last, seq)
-    acc_vo_only = _accuracy(vo_res, seq)["vo"]
+    acc_vo_only = _accuracy(sp["vo_result"], seq)["vo"]
     comp = {k: float(np.mean(v)) * 1000 for k, v in last.timings.items() if k != "final_optimisation"}
     comp["final_optimisation"] = float(last.timings["final_optimisation"][0]) * 1000
+    mem = _memory(args, seq_path, out / "sequences")
 
-    mem = {}
-    if args.memory_frames > 0:
-        mem_short = _peak_memory(seq_path, args)
-        long_len = args.length * args.memory_frames / args.frames
-        long_path = _sequence(cache, args.memory_frames, long_len, args.floor, args.seed + 1)
-        mem_long = _peak_memory(long_path, args)
-        mem = {"short": mem_short, "long": mem_long, "ratio_long_over_short": mem_long["peak_rss_mb"] / mem_short["peak_rss_mb"]}
-
-    rows = [["decode only (baseline)", f"{decode_fps:.0f}", "-", "-", "-"],
-            ["VO only, no recording (baseline)", f"{vo_fps:.1f}", f"{acc_vo_only['ate_percent_of_path']:.3f}",
-             f"{acc_vo_only['start_to_end_error_m'] * 100:.2f}", "-"],
-            [f"full SLAM, mode {args.mode}, recording on (median of {args.runs})", f"{median(full_fps):.1f}",
-             f"{acc['slam']['ate_percent_of_path']:.3f}", f"{acc['slam']['start_to_end_error_m'] * 100:.2f}",
-             f"{acc.get('loops', {}).get('precision', float('nan')):.3f} / {acc.get('loops', {}).get('recall', float('nan')):.3f}"]]
-    print(f"\nsequence: {len(seq)} frames 640x480, {acc['slam']['path_m']:.1f} m closed loop over {args.floor}")
-    print(format_table(["configuration", "frames/s", "ATE % of path", "start-to-end error (cm)",
-                        "loop precision / recall"], rows))
-    print(f"\nfull pipeline / VO only speed: {median(full_fps) / vo_fps:.2f}; VO-only ATE "
-          f"{acc_vo_only['ate_rmse_m']:.3f} m vs SLAM {acc['slam']['ate_rmse_m']:.3f} m")
-    print("mean ms per frame: " + ", ".join(f"{k} {v:.2f}" for k, v in comp.items()))
-    if mem:
-        print(f"peak memory: {mem['short']['peak_rss_mb']:.0f} MB at {mem['short']['frames']} frames, "
-              f"{mem['long']['peak_rss_mb']:.0f} MB at {mem['long']['frames']} frames "
-              f"(ratio {mem['ratio_long_over_short']:.2f})")
-    write_json(out / "pipeline.json", {"frames": len(seq), "decode_fps": decode_fps, "vo_only_fps": vo_fps,
-                                       "full_fps_runs": full_fps, "full_fps_median": median(full_fps),
+    title = f"sequence: {len(seq)} frames 640x480, {acc['slam']['path_m']:.1f} m closed loop over {args.floor}"
+    table = _table(args, sp, acc, acc_vo_only)
+    notes = _notes(sp, acc, acc_vo_only, comp, mem)
+    print(f"\n{title}")
+    print(table)
+    print("\n" + "\n".join(notes))
+    write_json(out / "pipeline.json", {"frames": len(seq), "decode_fps": sp["decode_fps"], "vo_only_fps": sp["vo_fps"],
+                                       "full_fps_runs": sp["full_fps"], "full_fps_median": median(sp["full_fps"]),
                                        "accuracy": acc, "vo_only_accuracy": acc_vo_only, "mean_ms": comp,
                                        "memory": mem, "mode": args.mode, "floor": args.floor})
     print(f"wrote {out / 'pipeline.json'}")
-    return 0
+    return BenchResult(f"{title}\n\n{table}\n\n" + "\n\n".join(notes))

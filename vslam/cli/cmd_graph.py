@@ -38,48 +38,17 @@ def run(a: argparse.Namespace) -> int:  # pragma: no cover - argparse dispatches
     return a.func(a)
 
 
-def _describe(data) -> str:
-    kind = "SE(2)" if data.dim == 2 else "SE(3)"
-    no_guess = int((~data.has_pose).sum())
-    return (f"{data.num_nodes} vertices ({kind}{f', {no_guess} without a guess' if no_guess else ''}), "
-            f"{data.num_edges} edges: {data.num_edges - data.num_loops} odometry, {data.num_loops} loops")
-
-
 def run_info(a: argparse.Namespace) -> int:
-    from graph import read_graph
+    from vslam.app.graph import graph_file_info  # on use: keeps `vslam --help` fast (see vslam.cli.main)
 
-    data = read_graph(a.input)
-    print(f"{a.input}: {_describe(data)}")
-    if len(data.fixed):
-        print(f"fixed vertices: {', '.join(str(i) for i in data.fixed.tolist())}")
+    print(graph_file_info(a.input))
     return 0
 
 
 def run_optimize(a: argparse.Namespace) -> int:
-    import numpy as np
+    from vslam.app.graph import optimize_graph_file
 
-    from graph import GraphParams, optimize, read_graph, write_graph
-    from odometry.shared.atomic_io import atomic_write_text
-
-    data = read_graph(a.input)
-    params = GraphParams.preset(a.preset)
-    res = optimize(data, params, solver=a.solver, robust=a.robust, init=a.init)
-    write_graph(a.out, data, res.poses)
-    print(f"{a.input}: {_describe(data)}")
-    print(f"solver {res.solver}, robust {res.robust}, init {res.init}")
-    print(f"cost {res.initial_cost:.6g} -> {res.final_cost:.6g}  ({res.iterations} iterations"
-          f"{f', {res.gnc_iterations} GNC steps' if res.gnc_iterations else ''})")
-    print(f"time {res.seconds:.3f} s (initial guess {res.init_seconds:.3f} s)")
-    print(f"loops kept {res.loops_kept} / rejected {res.loops_rejected}")
-    print(f"wrote {a.out}")
-    if a.tum:
-        res.write_tum(a.tum)
-        print(f"wrote {a.tum}")
-    if a.labels:
-        rows = ["edge,from,to,inlier,weight,r2"]
-        for e, ok, w, r2 in zip(res.loop_edges.tolist(), res.loop_inlier.tolist(), res.loop_weight.tolist(),
-                                res.loop_residual.tolist()):
-            rows.append(f"{e},{int(data.edge_from[e])},{int(data.edge_to[e])},{int(ok)},{w:.6g},{r2:.6g}")
-        atomic_write_text(a.labels, "\n".join(rows) + "\n")
-        print(f"wrote {a.labels}")
-    return 0 if np.all(np.isfinite(res.poses)) else 1
+    res = optimize_graph_file(a.input, a.out, a.preset, solver=a.solver, robust=a.robust, init=a.init, tum=a.tum,
+                              labels=a.labels)
+    print("\n".join(res.lines))
+    return 0 if res.finite else 1

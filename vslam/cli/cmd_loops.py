@@ -1,14 +1,13 @@
 """`vslam loops SEQ --mode M --out DIR`: loop detection alone (compact descriptors), writes DIR/loops.csv.
 
-Works on any image sequence (sequence directory, TUM/KITTI folder, image folder, video): no odometry, ground
-truth or camera height is needed. A downward camera (camera_height in camera.yaml) uses the floor geometry
-check (rotation + translation); anything else the general one.
+Works on any image sequence (sequence directory, TUM/KITTI folder, image folder, video); see `vslam.app.loops`.
 """
 from __future__ import annotations
 
 import argparse
+import sys
 
-from vslam.errors import VslamError
+from vslam.cli.progress import Progress
 
 NAME = "loops"
 HELP = "detect loops in an image sequence with compact descriptors (writes loops.csv)"
@@ -35,60 +34,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(a: argparse.Namespace) -> int:
-    import json
-    import sys
-    from dataclasses import replace
-    from pathlib import Path
+    from vslam.app.loops import detect_sequence_loops  # on use: keeps `vslam --help` fast
 
-    from loops.cdvs import CdvsParams, GeometryModel
-    from loops.cdvs.database import DatabaseParams
-    from loops.cdvs.detector import LOOPS_CSV_HEADER, detect_loops
-    from loops.cdvs.model import LoopModel
-    from odometry.shared.atomic_io import atomic_write_text
-    from vslam.cli.progress import Progress
-    from vslam.io import open_sequence
-
-    if a.every < 1 or a.shortlist < 1 or a.exclude_recent < 0 or a.confirmations < 1:
-        raise VslamError("--every, --shortlist and --confirmations must be >= 1 and --exclude-recent >= 0")
-    seq = open_sequence(a.sequence, camera=a.camera, fps=a.fps)
-    model = LoopModel.load(a.model) if a.model else LoopModel.default()
-    downward = seq.camera is not None and seq.camera.camera_height is not None
-    geometry = {"floor": GeometryModel.SIMILARITY, "general": GeometryModel.AFFINE,
-                "auto": GeometryModel.SIMILARITY if downward else GeometryModel.AFFINE}[a.geometry]
-    params = CdvsParams.floor(a.mode) if downward else CdvsParams.for_mode(a.mode)
-    params = replace(params, matching=replace(params.matching, geometry=geometry))
-    dbp = DatabaseParams(shortlist=a.shortlist, exclude_recent=a.exclude_recent, confirmations=a.confirmations)
-    indices = list(range(0, len(seq), a.every))
-    warnings: list[str] = []
-
-    def frames():
-        for i in indices:
-            try:
-                yield i, seq.image(i, gray=True)
-            except ValueError as exc:  # an unreadable frame is skipped, not fatal
-                warnings.append(str(exc))
-                yield i, None
-
-    prog = Progress(len(indices), "loops", enabled=None if not a.quiet else False)
-    rows, st = detect_loops(frames(), a.mode, params, dbp, model=model, threshold=a.threshold,
-                            on_frame=lambda k: prog.update(k + 1))
-    elapsed = prog.close()
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "loops.csv", ",".join(LOOPS_CSV_HEADER) + "\n" + "".join(r.csv() + "\n" for r in rows))
-    thr = a.threshold if a.threshold is not None else model.threshold(a.mode)
-    summary = {"sequence": str(a.sequence), "mode": a.mode, "keyframes": st.frames, "skipped_frames": st.skipped,
-               "candidates": st.candidates, "accepted": st.accepted,
-               "threshold": thr if thr != float("inf") else None, "geometry": geometry.value,
-               "model": str(a.model) if a.model else "default",
-               "mean_bytes": st.bytes_total / max(st.frames, 1),
-               "encode_ms_per_frame": 1e3 * st.encode_seconds / max(st.frames, 1),
-               "query_ms_per_frame": 1e3 * st.query_seconds / max(st.frames, 1), "seconds": elapsed,
-               "warnings": warnings[:20]}
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    for w in warnings[:5]:
+    bar = Progress(0, "loops", enabled=None if not a.quiet else False)
+    res = detect_sequence_loops(a.sequence, a.out, mode=a.mode, model=a.model, threshold=a.threshold, every=a.every,
+                                shortlist=a.shortlist, exclude_recent=a.exclude_recent,
+                                confirmations=a.confirmations, geometry=a.geometry, camera=a.camera, fps=a.fps,
+                                progress=bar.update)
+    bar.close()
+    for w in res.warnings[:5]:
         print(f"vslam loops: warning: skipped unreadable frame: {w}", file=sys.stderr)
     if not a.quiet:
-        print(f"{st.frames} keyframes, {st.candidates} verified candidates, {st.accepted} accepted loops "
-              f"(mode {a.mode}, threshold {thr:.3g}) -> {out / 'loops.csv'}")
+        print(res.line())
     return 0

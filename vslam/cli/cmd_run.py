@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
+
+from vslam.cli.progress import Progress
 
 NAME = "run"
 HELP = "run SLAM (VO + compact-descriptor loops + robust pose graph) on a sequence; writes trajectories, loops, " \
@@ -25,9 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def build_config(a: argparse.Namespace):
-    from dataclasses import replace
-
-    from vslam.pipeline.config import PipelineConfig
+    from vslam.pipeline.config import PipelineConfig  # on use: it loads the pose graph (scipy.stats)
 
     cfg = PipelineConfig.load(a.config) if a.config else PipelineConfig()
     loops = cfg.loops
@@ -45,66 +46,16 @@ def build_config(a: argparse.Namespace):
     return cfg
 
 
-def format_summary(result, metrics_eval: dict | None, out) -> str:
-    s = result.summary()
-    st = s["vo_status"]
-    ms = s["median_ms"]
-    lines = [f"vslam run: {s['frames']} frames in {s['wall_seconds']:.1f} s ({s['frames_per_second']:.1f} frames/s), "
-             f"{s['keyframes']} keyframes",
-             f"  VO       ok {st.get('ok', 0)}, fallback {st.get('fallback', 0)}, lost {st.get('lost', 0)}; "
-             f"median {ms.get('vo', 0):.1f} ms/frame",
-             f"  loops    {s['loops_verified']} verified candidates, {s['loops_accepted']} accepted, "
-             f"{s['loops_kept']} kept by the back end, {s['loops_rejected_by_backend']} rejected as outliers; "
-             f"descriptor {s['descriptor_bytes_mean']:.0f} B mean / {s['descriptor_bytes_max']} B max"]
-    if metrics_eval:
-        for name in ("vo", "slam"):
-            d = metrics_eval[name]
-            se = d["start_to_end"]
-            lines.append(f"  {name.upper():<8} ATE {d['ape_m']['rmse']:.4f} m RMSE ({d['ape_rmse_percent_of_path']:.3f} % of "
-                         f"{d['path_length_m']:.1f} m), start-to-end error {se.get('error_distance', float('nan')):.4f} m")
-        if "loops" in metrics_eval:
-            la = metrics_eval["loops"]["kept_by_back_end"]
-            lines.append(f"  loops vs footprint ground truth: precision {la['precision']:.3f}, "
-                         f"recall {la.get('recall', float('nan')):.3f}")
-    lines.append(f"  outputs  {out}/ (trajectory_vo.txt, trajectory_slam.txt, loops.csv, graph.g2o, metrics.json, "
-                 f"plots/{', recording.rrd' if result.config.recording.enabled else ''})")
-    return "\n".join(lines)
-
-
 def run(a: argparse.Namespace) -> int:
-    import json
-    from pathlib import Path
-
-    from vslam.cli.progress import Progress
-    from vslam.io import open_sequence
-    from vslam.pipeline import Pipeline
+    from vslam.app.run import run_sequence  # on use: keeps `vslam --help` fast (see vslam.cli.main)
 
     cfg = build_config(a)
     if a.print_config:
         print(cfg.dumps(), end="")
         return 0
-    seq = open_sequence(a.sequence, camera=a.camera)
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    recorder = None
-    if cfg.recording.enabled:
-        from vslam.recording import RunRecorder
-
-        recorder = RunRecorder(out / "recording.rrd", seq.camera, recording_id=f"vslam-{seq.name}",
-                               jpeg_quality=cfg.recording.jpeg_quality, image_every=cfg.recording.image_every)
-    bar = Progress(len(seq) if a.max_frames is None else min(len(seq), a.max_frames), label="vslam run",
-                   enabled=None if not a.quiet else False)
-    try:
-        result = Pipeline(cfg, recorder=recorder).run(seq, progress=bar.update, max_frames=a.max_frames)
-    except BaseException:
-        if recorder is not None:
-            recorder.abort()
-        raise
+    bar = Progress(0, label="vslam run", enabled=None if not a.quiet else False)
+    summary = run_sequence(a.sequence, a.out, cfg, camera=a.camera, max_frames=a.max_frames, progress=bar.update)
     bar.close()
-    if recorder is not None:
-        recorder.close()
-    result.write(out, sequence=seq)
     if not a.quiet:
-        metrics = json.loads((out / "metrics.json").read_text())
-        print(format_summary(result, metrics.get("evaluation"), out))
+        print(summary.format())
     return 0

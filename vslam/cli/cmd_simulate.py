@@ -2,8 +2,14 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
+from vslam.cli.progress import Progress
 from vslam.errors import VslamError
+from vslam.sim import Effects, SensorNoise, SimConfig, simulate
+from vslam.sim.floor import FloorType
+from vslam.sim.simulate import length_for_frames
+from vslam.sim.trajectory import TrajectoryKind
 
 NAME = "simulate"
 HELP = "render a simulated downward-camera sequence (images, wheel odometry, gyro, ground truth)"
@@ -20,9 +26,6 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from vslam.sim.floor import FloorType
-    from vslam.sim.trajectory import TrajectoryKind
-
     p.add_argument("out_dir", help="output sequence directory (must not exist unless --overwrite)")
     p.add_argument("--floor", default="carpet", choices=[f.value for f in FloorType],
                    help="floor type; printed-wood repeats a few laminate prints on purpose (false-loop worst case)")
@@ -61,24 +64,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(a: argparse.Namespace):
-    from vslam.sim import Effects, SensorNoise, SimConfig
-
     w, h = a.size
     if a.clean:
         effects = Effects.preset("none")
     else:
         effects = Effects(motion_blur=not a.no_blur, lighting=not a.no_lighting, vignetting=not a.no_vignetting,
                           sensor_noise=not a.no_noise, wobble=not a.no_wobble)
-    from dataclasses import replace
-
     effects = replace(effects, dropped_frames=a.dropped_frames, corrupt_frames=a.corrupt_frames, exposure=a.exposure)
     for name, v in (("--dropped-frames", a.dropped_frames), ("--corrupt-frames", a.corrupt_frames)):
         if not 0.0 <= v <= 1.0:
             raise VslamError(f"{name} must be a probability in [0, 1], got {v}")
     length = a.length
     if length is None:
-        from vslam.sim.simulate import length_for_frames
-
         length = 10.0 if a.frames is None else length_for_frames(a.frames, a.fps, a.speed)
     if a.frames is not None and a.frames < 2:
         raise VslamError("--frames must be at least 2")
@@ -93,9 +90,6 @@ def config_from_args(a: argparse.Namespace):
 
 
 def run(a: argparse.Namespace) -> int:
-    from vslam.cli.progress import Progress
-    from vslam.sim import simulate
-
     cfg = config_from_args(a)
     bar = Progress(0, label="simulate", enabled=None if not a.quiet else False)
     res = simulate(cfg, a.out_dir, overwrite=a.overwrite, progress=bar.update)

@@ -1,12 +1,10 @@
-"""`vslam train-loops SEQ... --out loops-model.json`: learn P(loop | local score) and the per-mode thresholds.
-
-Each training sequence needs wheel odometry (odometry.csv), optionally a gyro (imu.csv), and a downward camera
-(camera_height): relative motion comes from the wheel/gyro fusion (never from ground truth), the floor-footprint
-overlap J of keyframe pairs from those poses, and loop = J >= r (seed 001 §III).
-"""
+"""`vslam train-loops SEQ... --out loops-model.json`: learn P(loop | local score) and the per-mode thresholds
+(see `vslam.app.train_loops`)."""
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 from vslam.errors import VslamError
 
@@ -46,98 +44,20 @@ def _parse_modes(text: str) -> tuple[int, ...]:
     return modes
 
 
-def fused_trajectory(seq):
-    """The wheel/gyro fusion (odometry.fusion) at the frame times."""
-    from odometry.fusion import fuse_wheel_gyro
-
-    if seq.odometry is None:
-        raise VslamError(f"{seq.root or seq.name}: train-loops needs wheel odometry (odometry.csv)")
-    imu = seq.imu
-    fused = fuse_wheel_gyro(seq.odometry.timestamps, seq.odometry.v, seq.odometry.omega,
-                            None if imu is None else imu.timestamps, None if imu is None else imu.gyro_z,
-                            seq.timestamps)
-    return fused
-
-
 def run(a: argparse.Namespace) -> int:
-    import sys
-    import time
-    import zlib
-    from pathlib import Path
-
-    import numpy as np
-
-    from loops.cdvs.loop_training import (
-        PairScores,
-        encode_all,
-        fit_loop_model,
-        floor_params,
-        score_sequence,
-        trustworthy_pairs,
-    )
-    from loops.cdvs.plots import plot_loop_model
-    from loops.cdvs.trained import load_trained
-    from vslam.io import open_sequence
+    from vslam.app.train_loops import PairSampling, train_loop_model  # on use: keeps `vslam --help` fast
 
     modes = _parse_modes(a.modes)
-    if not 0 < a.overlap <= 1:
-        raise VslamError(f"--overlap must be in (0, 1], got {a.overlap}")
-    if a.every < 1:
-        raise VslamError("--every must be >= 1")
-    trained = load_trained()
-    scored, sources = [], []
-    for path in a.sequences:
-        t0 = time.perf_counter()
-        seq = open_sequence(path)
-        cam = seq.require_camera() if hasattr(seq, "require_camera") else seq.camera
-        if cam is None or cam.camera_height is None:
-            raise VslamError(f"{path}: camera.yaml has no camera_height: J needs a downward-facing camera")
-        fused = fused_trajectory(seq)
-        idx = np.arange(0, len(seq), a.every)
-        key = f"{Path(path).resolve().name}-{zlib.crc32(str(Path(path).resolve()).encode()):08x}-" \
-              f"{trained.params_id:04x}-e{a.every}-x{a.exclude_recent}-" \
-              f"s{a.shortlist}-r{a.random}-{a.seed}-{''.join(map(str, modes))}-v2.npz"
-        cached = Path(a.cache) / key if a.cache else None
-        if cached is not None and cached.is_file():
-            ps = PairScores.load(cached)
-        else:
-            images = (seq.image(int(i), gray=True) for i in idx)
-            params = floor_params(modes)
-            descs = encode_all(images, modes, params, trained=trained)
-            ps = score_sequence(descs, cam, fused.poses[idx], exclude_recent=a.exclude_recent,
-                                shortlist=a.shortlist, n_random=a.random, seed=a.seed, trained=trained,
-                                params=params)
-            if cached is not None:
-                ps.save(cached)
-        rmax = float(np.max(np.linalg.norm(cam.footprint(), axis=1)))
-        ps.usable, _ = trustworthy_pairs(ps.pairs, lambda i, j: fused.relative(int(idx[i]), int(idx[j])), rmax,
-                                         a.max_sigma)
-        scored.append(ps)
-        loop = ps.overlap >= a.overlap
-        sources.append({"sequence": str(path), "keyframes": int(len(idx)), "pairs": int(len(ps.pairs)),
-                        "loop_pairs": int(np.sum(loop & ps.usable)), "pairs_used": int(ps.usable.sum())})
-        if not a.quiet:
-            print(f"{path}: {len(idx)} keyframes, {len(ps.pairs)} pairs matched, {int(ps.usable.sum())} with a "
-                  f"trustworthy label ({int(np.sum(loop & ps.usable))} loops), {time.perf_counter() - t0:.0f} s",
-                  file=sys.stderr)
-    provenance = {"command": "vslam train-loops " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["train-loops"]
-                  else "vslam train-loops", "sequences": sources, "overlap_threshold": a.overlap,
-                  "relative_motion": "odometry.fusion.fuse_wheel_gyro (wheel odometry + gyro)",
-                  "every": a.every, "exclude_recent": a.exclude_recent, "shortlist": a.shortlist,
-                  "random": a.random, "seed": a.seed, "descriptor_params_id": trained.params_id,
-                  "max_sigma": a.max_sigma,
-                  "descriptor_preset": "CdvsParams.floor"}
-    min_overlap = a.overlap + 0.05 if a.min_overlap is None else (None if a.min_overlap < 0 else a.min_overlap)
-    if min_overlap is not None and min_overlap > 1:
-        raise VslamError(f"--min-overlap must be <= 1, got {a.min_overlap}")
-    provenance["min_overlap"] = min_overlap
-    model = fit_loop_model(scored, a.overlap, provenance, min_overlap=min_overlap)
-    out = Path(a.out)
-    model.save(out)
-    if not a.no_plot:
-        plot_loop_model(model, out.with_suffix(".png"))
+    command = ("vslam train-loops " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["train-loops"]
+               else "vslam train-loops")
+    sampling = PairSampling(every=a.every, exclude_recent=a.exclude_recent, shortlist=a.shortlist, random=a.random,
+                            seed=a.seed, max_sigma=a.max_sigma)
+    model = train_loop_model(a.sequences, a.out, modes, a.overlap, sampling, min_overlap=a.min_overlap,
+                             cache=a.cache, plot=not a.no_plot, command=command,
+                             log=None if a.quiet else (lambda line: print(line, file=sys.stderr)))
     if not a.quiet:
         for m in modes:
             print(f"mode {m}: threshold {model.threshold(m):.3g}")
+        out = Path(a.out)
         print(f"wrote {out}" + ("" if a.no_plot else f" and {out.with_suffix('.png')}"))
     return 0

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from odometry.shared.poses import between, wrap_angle
 from vslam.errors import VslamError
 
 
@@ -237,8 +238,6 @@ def start_to_end_error(est_planar: np.ndarray, gt_planar: np.ndarray | None = No
     """Seed 001 Table IV: the estimated pose of the end relative to the start (ideally zero on a closed path).
     With ground truth, also the error of that relative pose against the true one (the robot may not stop exactly
     where it started)."""
-    from odometry.shared.poses import between, wrap_angle
-
     d = between(est_planar[0], est_planar[-1])
     out = {"dx": float(d[0]), "dy": float(d[1]), "dtheta": float(d[2]), "distance": float(math.hypot(d[0], d[1]))}
     if gt_planar is not None:

@@ -1,4 +1,5 @@
-"""PNG plots of a run: trajectories with loop edges, error over time, loop score matrix."""
+"""PNG plots: a run's trajectories with loop edges, error over time and loop score matrix; ROC and
+precision-recall curves of place recognition. Every plot is written atomically."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -8,7 +9,10 @@ import numpy as np
 from odometry.shared.atomic_io import atomic_path
 
 
-def _plt():
+def pyplot():
+    """matplotlib.pyplot with the file-only Agg backend."""
+    # imported on the first plot: matplotlib takes about 0.4 s, and this module is imported by commands (and by
+    # `vslam --help`) that never plot
     import matplotlib
 
     matplotlib.use("Agg")
@@ -21,7 +25,7 @@ def plot_trajectories(path: str | Path, trajectories: dict[str, np.ndarray], loo
                       title: str = "") -> None:
     """Top-down view of planar trajectories {name: (N, 2+)}; loop edges drawn between `loop_positions`
     {'accepted': [(p, q)], 'rejected': [...], 'outlier': [...]}."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
     styles = {"ground truth": dict(color="0.3", lw=2.0, ls="--"), "VO": dict(color="tab:orange", lw=1.2),
               "SLAM": dict(color="tab:blue", lw=1.4)}
@@ -48,7 +52,7 @@ def plot_trajectories(path: str | Path, trajectories: dict[str, np.ndarray], loo
 
 
 def plot_errors(path: str | Path, series: dict[str, tuple[np.ndarray, np.ndarray]], ylabel: str = "APE (m)") -> None:
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 3.5), dpi=110)
     for name, (t, e) in series.items():
         ax.plot(t, e, label=name, lw=1.0)
@@ -64,7 +68,7 @@ def plot_errors(path: str | Path, series: dict[str, tuple[np.ndarray, np.ndarray
 def plot_score_matrix(path: str | Path, query: np.ndarray, match: np.ndarray, score: np.ndarray, n: int,
                       title: str = "local score", max_size: int = 600) -> None:
     """Score of query i against match j as an image (like seed 001 Fig. 2), frames binned to at most max_size."""
-    plt = _plt()
+    plt = pyplot()
     n = max(int(n), 1)
     b = max(1, int(np.ceil(n / max_size)))
     m = np.full((n // b + 1, n // b + 1), np.nan)
@@ -79,4 +83,43 @@ def plot_score_matrix(path: str | Path, query: np.ndarray, match: np.ndarray, sc
     ax.set_ylabel(f"query frame (/{b})" if b > 1 else "query frame")
     with atomic_path(path) as tmp:
         fig.savefig(tmp, bbox_inches="tight")
+    plt.close(fig)
+
+
+def plot_roc_curves(path: str | Path, curves: dict[str, tuple], title: str) -> None:
+    """ROC curves {name: (fpr, tpr, auc)} as a PNG."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(4.8, 4.2), dpi=100)
+    for name, (fpr, tpr, a) in curves.items():
+        ax.plot(fpr, tpr, label=f"{name} (AUC {a:.3f})", lw=1.5)
+    ax.plot([0, 1], [0, 1], ":", color="grey", lw=0.8)
+    ax.set_xlabel("false positive rate (1 - specificity)")
+    ax.set_ylabel("true positive rate (sensitivity)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc="lower right", fontsize=8)
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.01)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp)
+    plt.close(fig)
+
+
+def plot_pr_curves(path: str | Path, curves: dict, title: str) -> None:
+    """Precision-recall curves {label: PRCurve (recall, precision, average_precision)} as a PNG."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
+    for label, pr in curves.items():
+        ax.plot(pr.recall, pr.precision, label=f"{label} (AP {pr.average_precision:.2f})")
+    ax.set_xlabel("recall")
+    ax.set_ylabel("precision")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower left")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp)
     plt.close(fig)

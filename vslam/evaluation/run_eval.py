@@ -1,4 +1,5 @@
-"""Evaluate a run directory written by `vslam run` (or any folder with TUM trajectories) against ground truth."""
+"""Evaluate a SLAM run against ground truth: a run directory written by `vslam run` (or any folder with TUM
+trajectories), or a pipeline result in memory beside its sequence."""
 from __future__ import annotations
 
 import json
@@ -7,11 +8,14 @@ from pathlib import Path
 import numpy as np
 
 from odometry.shared.atomic_io import atomic_write_text
-from odometry.shared.tum import read_tum, tum_to_se2, tum_to_se3_matrices
+from odometry.shared.camera import CameraModel
+from odometry.shared.tum import read_tum, se2_to_tum, tum_to_se2, tum_to_se3_matrices
 from vslam.errors import VslamError
 from vslam.evaluation import plots
-from vslam.evaluation.loops import loop_precision_recall, read_loops_csv
+from vslam.evaluation.loops import LoopTable, loop_precision_recall, read_loops_csv
 from vslam.evaluation.metrics import Alignment, DeltaUnit, align, associate, evaluate, start_to_end_error
+from vslam.io import open_sequence
+from vslam.sequence import Trajectory
 
 TRAJECTORIES = {"VO": "trajectory_vo.txt", "SLAM": "trajectory_slam.txt"}
 
@@ -30,8 +34,6 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
         src = run_info.get("sequence")
         if src is None:
             raise VslamError(f"{out}: no ground truth given (--gt FILE) and no run.json naming the sequence")
-        from vslam.io import open_sequence
-
         seq = open_sequence(src, check_images="none")
         if seq.groundtruth is None:
             raise VslamError(f"{src}: the sequence has no ground truth; give one with --gt FILE")
@@ -62,14 +64,10 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
         loops = read_loops_csv(out / "loops.csv")
         camera = seq.camera if seq is not None else None
         if camera is None and "camera" in run_info:
-            from odometry.shared.camera import CameraModel
-
             camera = CameraModel.from_dict(run_info["camera"])
         frame_t = np.asarray(run_info.get("frame_timestamps", [])) if run_info.get("frame_timestamps") else (
             seq.timestamps if seq is not None else None)
         if camera is not None and camera.camera_height is not None and frame_t is not None and len(frame_t):
-            from vslam.sequence import Trajectory
-
             gt_frames = Trajectory(t_gt, gt).planar_at(frame_t, max_gap=0.5)
             queried = run_info.get("keyframes")
             kw = dict(queried=np.asarray(queried) if queried else None, r=overlap_threshold,
@@ -91,6 +89,32 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
             plots.plot_score_matrix(pdir / "loop_scores.png", loops.query, loops.match, loops.local_score, n)
     atomic_write_text(out / "eval.json", json.dumps(report, indent=2, default=float) + "\n")
     return report
+
+
+def evaluate_result(result, seq) -> dict:
+    """metrics.json's "evaluation" of a pipeline result against its sequence's ground truth: per trajectory ("vo",
+    "slam") ATE/RPE after an SE(2) alignment and the start-to-end error; "loops": precision/recall of the accepted
+    loops and of those the back end kept (floor-footprint overlap ground truth)."""
+    gt = seq.groundtruth
+    gtm = tum_to_se3_matrices(gt.poses)
+    out = {}
+    gt_frames = seq.groundtruth_planar()[: len(result.timestamps)]
+    for name, p in (("vo", result.poses_vo), ("slam", result.poses_slam)):
+        rep = evaluate(gt.timestamps, gtm, result.timestamps, tum_to_se3_matrices(se2_to_tum(p)), "se2")
+        d = rep.to_dict()
+        ok = ~np.isnan(gt_frames[:, 0])
+        d["start_to_end"] = start_to_end_error(p[ok], gt_frames[ok])
+        out[name] = d
+    if result.loops:
+        L = result.loops
+        table = LoopTable(np.array([l.query_frame for l in L]), np.array([l.match_frame for l in L]),
+                          np.array([l.global_score for l in L]), np.array([l.local_score for l in L]),
+                          np.array([l.probability for l in L]), np.array([l.accepted for l in L]),
+                          np.array([bool(l.inlier) for l in L]))
+        kw = dict(queried=result.keyframes, min_separation=result.config.database_params().exclude_recent + 1)
+        out["loops"] = {"accepted": loop_precision_recall(result.camera, gt_frames, table, **kw),
+                        "kept_by_back_end": loop_precision_recall(result.camera, gt_frames, table, use_inliers=True, **kw)}
+    return out
 
 
 def _loop_segments(out: Path, loops) -> dict:

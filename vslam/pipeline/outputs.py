@@ -9,7 +9,9 @@ import numpy as np
 from graph.formats import write_g2o
 from odometry.shared.atomic_io import atomic_write_text
 from odometry.shared.tum import write_tum
+from vslam.evaluation import plots
 from vslam.evaluation.loops import RUN_LOOPS_HEADER
+from vslam.evaluation.run_eval import evaluate_result
 
 
 def _fmt(v) -> str:
@@ -53,43 +55,14 @@ def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = T
                             "initial_cost": g.initial_cost, "final_cost": g.final_cost, "iterations": g.iterations,
                             "seconds": g.seconds}
     if evaluate and sequence is not None and sequence.groundtruth is not None:
-        metrics["evaluation"] = _evaluate(result, sequence)
+        metrics["evaluation"] = evaluate_result(result, sequence)
     atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float) + "\n")
     if plots:
         _plots(result, out, sequence)
     return out
 
 
-def _evaluate(result, seq) -> dict:
-    from odometry.shared.tum import se2_to_tum, tum_to_se3_matrices
-    from vslam.evaluation.loops import LoopTable, loop_precision_recall
-    from vslam.evaluation.metrics import evaluate, start_to_end_error
-
-    gt = seq.groundtruth
-    gtm = tum_to_se3_matrices(gt.poses)
-    out = {}
-    gt_frames = seq.groundtruth_planar()[: len(result.timestamps)]
-    for name, p in (("vo", result.poses_vo), ("slam", result.poses_slam)):
-        rep = evaluate(gt.timestamps, gtm, result.timestamps, tum_to_se3_matrices(se2_to_tum(p)), "se2")
-        d = rep.to_dict()
-        ok = ~np.isnan(gt_frames[:, 0])
-        d["start_to_end"] = start_to_end_error(p[ok], gt_frames[ok])
-        out[name] = d
-    if result.loops:
-        L = result.loops
-        table = LoopTable(np.array([l.query_frame for l in L]), np.array([l.match_frame for l in L]),
-                          np.array([l.global_score for l in L]), np.array([l.local_score for l in L]),
-                          np.array([l.probability for l in L]), np.array([l.accepted for l in L]),
-                          np.array([bool(l.inlier) for l in L]))
-        kw = dict(queried=result.keyframes, min_separation=result.config.database_params().exclude_recent + 1)
-        out["loops"] = {"accepted": loop_precision_recall(result.camera, gt_frames, table, **kw),
-                        "kept_by_back_end": loop_precision_recall(result.camera, gt_frames, table, use_inliers=True, **kw)}
-    return out
-
-
 def _plots(result, out: Path, seq) -> None:
-    from vslam.evaluation import plots
-
     pdir = out / "plots"
     pdir.mkdir(exist_ok=True)
     trajs = {}
