@@ -8,7 +8,7 @@ from loops.cdvs.recognizer import CdvsRecognizer
 from loops.vocab.recognizer import VocabRecognizer
 from vslam.io import open_sequence
 from vslam.pipeline import Pipeline, PipelineConfig
-from vslam.pipeline.dataclass_io import ConfigError
+from odometry.shared.errors import ConfigError
 from vslam.pipeline.recognizers import build_loop_detector
 from vslam.sim import SimConfig, simulate
 
