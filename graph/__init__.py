@@ -9,7 +9,7 @@
 
 `IncrementalPoseGraph` has the same add_* calls on iSAM2, `estimate()` / `pose(id)` on demand and
 `classify_loops()`. `read_graph` / `write_graph` read and write g2o and TORO files; `optimize(data, params)`
-solves a `PoseGraphData`. See README, section graph, for the design and the measurements behind the defaults.
+solves a `PoseGraphData`. See docs/graph.md for the design and the measurements behind the defaults.
 """
 from graph.formats import (
                            GraphFormatError,

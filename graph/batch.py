@@ -1,6 +1,6 @@
 """Batch optimisation of a `PoseGraphData`: initial guess, robust loop handling, Levenberg-Marquardt.
 
-Robust modes run in three stages (README, section graph, has the measurements behind each):
+Robust modes run in three stages (docs/graph.md has the measurements behind each):
 1. gate (`gate_loops`): the graph is replayed in time order through iSAM2 and each loop is tested against the
    estimate at its arrival; grossly inconsistent loops are deferred. Random false loops link distant places, and
    one joint solve containing thousands of them costs minutes on a 10^4-node graph (Cholesky fill-in);
@@ -40,7 +40,7 @@ from graph.thresholds import fence_scale, information_scale, loop_thresholds
 
 
 def resolve_init(data: PoseGraphData, params: GraphParams) -> InitMethod:
-    """AUTO: LAGO (2D) / chordal (3D) for least squares; the odometry tree when loops may be false (see README)."""
+    """AUTO: LAGO (2D) / chordal (3D) for least squares; the odometry tree when loops may be false (see docs/graph.md)."""
     m = params.init
     if m == InitMethod.AUTO:
         if params.robust == RobustMode.NONE:

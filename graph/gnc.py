@@ -4,7 +4,7 @@ Yang, Antonante, Tzoumas, Carlone, "Graduated Non-Convexity for Robust Spatial P
 the trusted factors (anchor + odometry) as known inliers. The weight updates are the paper's closed forms
 (the same as gtsam.GncOptimizer); the difference is in the inner solves: gtsam restarts every inner
 Levenberg-Marquardt run from the initial values, while this loop continues from the previous estimate with a
-few iterations, which is what makes it fast enough for 10^4-node graphs (see README, section graph, for the
+few iterations, which is what makes it fast enough for 10^4-node graphs (see docs/graph.md for the
 measurement). It also takes one inlier threshold per loop, which is how a loop's probability enters.
 """
 from __future__ import annotations

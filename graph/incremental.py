@@ -239,7 +239,7 @@ class IncrementalPoseGraph:
         latest gated loops, admitted or not. A quantile of all arrivals needs no decision to be right first (a level
         fed only by admitted loops drifts up once false loops get in); a low quantile holds while fewer than 75 % of
         the recent loops are false, which happens locally even at 33 % overall (garage: false loops arrive before
-        the first revisit). Arrival residuals of true loops span 1-2 decades above their lower quartile (README).
+        the first revisit). Arrival residuals of true loops span 1-2 decades above their lower quartile (docs/graph.md).
         None while fewer than `gate_min_loops` loops have arrived (they wait); at a final flush whatever has arrived
         is used (inf, the stated model alone, below 3 loops)."""
         n = len(self._arrival_r2)
@@ -259,7 +259,7 @@ class IncrementalPoseGraph:
         the odometry chain back to the latest node tied to the map by an admitted loop (or the anchor), carried
         into k's frame. This, not the global marginal, is what a true loop's residual has to allow for: the
         marginal of a node far from the anchor is dominated by uncertainty the loop's two ends share, and would
-        let random loops through (measured on w10000, README)."""
+        let random loops through (measured on w10000, docs/graph.md)."""
         chain = []
         while k not in self._since:
             link = self._drift[k]

@@ -30,7 +30,7 @@ class GncLoss(str, enum.Enum):
 
 
 class GncImpl(str, enum.Enum):
-    WARM = "warm"        # graph.gnc: warm-started inner solves, per-loop thresholds (default, see README)
+    WARM = "warm"        # graph.gnc: warm-started inner solves, per-loop thresholds (default, see docs/graph.md)
     GTSAM = "gtsam"      # gtsam.GncLMOptimizer (restarts every inner solve from the initial values)
 
 
@@ -58,7 +58,7 @@ class GraphParams(Config):
     fields; strings are accepted for enum fields."""
 
     PRESETS = {
-        # GNC-TLS loops, LM batch; the choice measured in `vslam bench graph` (README, section graph)
+        # GNC-TLS loops, LM batch; the choice measured in `vslam bench graph` (docs/graph.md)
         "default": {},
         # fewer iterations and a coarser GNC schedule: for previews and very large graphs
         "fast": {"lm_max_iterations": 30, "lm_relative_tol": 1e-4, "gnc_mu_step": 2.0, "gnc_max_iterations": 40,
@@ -114,11 +114,11 @@ class GraphParams(Config):
     loop_weighting: LoopWeighting = LoopWeighting.THRESHOLD
     probability_clip: float = setting(1e-3, range="(0, 0.5)", doc="p is clipped to [clip, 1 - clip] before the logit")
     # --- loop gate (robust modes): a loop is tested on arrival against the current estimate, in time order
-    gate_loops: bool = True              # batch robust solves run the gated incremental pass first (see README)
+    gate_loops: bool = True              # batch robust solves run the gated incremental pass first (see docs/graph.md)
     gate_uncertainty: bool = True        # add the odometry drift since the last loop closure to the arrival test
     gate_drift_transport: bool = False   # propagate it through the pose Jacobians (heading error -> lever arm):
     #                                      right in theory, but absurd stated heading noise (w10000: 1 rad per step)
-    #                                      then opens the gate to random loops (README)
+    #                                      then opens the gate to random loops (docs/graph.md)
     gate_probability: float = setting(0.9999, range="(0, 1)",
                                       doc="chi-square quantile of the arrival test (loop + current pose uncertainty)")
     gate_factor: float = setting(50.0, range="[0, inf)", doc="admit up to this many times ...")

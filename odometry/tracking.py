@@ -1,6 +1,6 @@
 """Image front end of the downward VO: input checks, photometric normalisation, corner detection, LK tracking.
 
-Why these choices (measured by `vslam bench odometry`, see the README): ORB detectAndCompute alone costs more
+Why these choices (measured by `vslam bench odometry`, see docs/benchmarks.md): ORB detectAndCompute alone costs more
 than the whole frame budget at 640x480, and its keypoints are about 6x less precise than LK's (inlier RMS
 0.64 px against 0.10 px). Instead, corners are detected only when a keyframe starts (Shi-Tomasi on a
 half-resolution image, spread over a grid). Every frame tracks the keyframe's corners directly with Lucas-Kanade,

@@ -153,5 +153,5 @@ class LoopModel:
 
     @classmethod
     def default(cls) -> "LoopModel":
-        """The shipped model, trained on simulated floors (see the README for the command)."""
+        """The shipped model, trained on simulated floors (docs/loops.md gives the command)."""
         return cls.load(DEFAULT_MODEL)

@@ -110,7 +110,7 @@ class CdvsParams(Config):
 
 # The per-mode table. Like the CDVS reference, the budget goes to many features with short descriptors rather than
 # few long ones: on real photographs 96 bits x 300 features (mode 4) matched clearly more pairs than 160 x 180 or
-# 256 x 115 (README, "48 real pairs"). max_local also bounds the matching time (all-pairs Hamming is N^2): modes 5
+# 256 x 115 (docs/benchmarks.md, "48 real pairs"). max_local also bounds the matching time (all-pairs Hamming is N^2): modes 5
 # and 6 do not fill their budgets. The global descriptor sends the 20 most populated clusters (their residual signs
 # are the stable ones); the floor preset keeps more (modes 4-6: all 64 words) for the database shortlist (FLOOR_GLOBAL_CLUSTERS).
 # The encoder enforces the budget exactly, dropping the least relevant features when coordinates cost more.

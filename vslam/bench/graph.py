@@ -8,7 +8,7 @@ recall and the share of injected loops labelled outliers. A method comparison (G
 the gate and the settling rounds, gtsam's own GNC) runs on the same injected loops of the smaller graphs, and a
 probability experiment compares the ways P(loop) can weight a loop.
 
-Definitions (also in the README):
+Definitions (also in docs/graph.md):
 - error vs clean = ATE RMSE of positions after a rigid (SE(2) / SE(3)) Umeyama alignment to the clean solution;
 - error scale = the clean solution's ATE RMSE against ground truth when the dataset has it, else the RMS length of
   the odometry steps of the clean solution; the target is error vs clean <= 5 % of the scale;
@@ -16,7 +16,7 @@ Definitions (also in the README):
   loops labelled outliers / injected.
 Datasets that are absent are skipped with a note. Plain least squares on graphs with more than
 --plain-lm-max-nodes nodes is skipped: random long-range loops make one Cholesky factorisation take minutes there
-(measured in the README).
+(measured in docs/benchmarks.md).
 """
 from __future__ import annotations
 

@@ -19,6 +19,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--loop-model", help="P(loop|score) model from `vslam train-loops` (default: the shipped model)")
     p.add_argument("--incremental", action="store_true", help="iSAM2 as keyframes arrive instead of batch LM")
     p.add_argument("--config", help="YAML or TOML file with pipeline settings (see --print-config)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one setting by its dotted key, e.g. --set loops.recognizer=vocab "
+                        "--set vo.max_features=300 (repeatable; applied after --config, before the flags below)")
     p.add_argument("--no-loops", action="store_true", help="visual odometry only")
     p.add_argument("--no-recording", action="store_true", help="do not write recording.rrd")
     p.add_argument("--camera", help="camera.yaml for image folders and videos")
@@ -31,6 +34,8 @@ def build_config(a: argparse.Namespace):
     from vslam.pipeline.config import PipelineConfig  # on use: it loads the pose graph (scipy.stats)
 
     cfg = PipelineConfig.load(a.config) if a.config else PipelineConfig()
+    if a.overrides:
+        cfg = cfg.with_overrides(a.overrides, source="--set")
     loops = cfg.loops
     if a.mode is not None:
         loops = replace(loops, mode=a.mode)
