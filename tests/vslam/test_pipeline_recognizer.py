@@ -6,9 +6,9 @@ import pytest
 
 from loops.cdvs.recognizer import CdvsRecognizer
 from loops.vocab.recognizer import VocabRecognizer
+from odometry.shared.errors import ConfigError
 from vslam.io import open_sequence
 from vslam.pipeline import Pipeline, PipelineConfig
-from odometry.shared.errors import ConfigError
 from vslam.pipeline.recognizers import build_loop_detector
 from vslam.sim import SimConfig, simulate
 
