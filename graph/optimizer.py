@@ -11,6 +11,7 @@ from graph import incremental
 from graph.batch import solve
 from graph.components import anchor_components
 from graph.errors import GraphError
+from graph.factors import anchor_nodes
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult
@@ -68,6 +69,10 @@ def _optimize(data: PoseGraphData, params: GraphParams) -> GraphResult:
         gate_seconds = time.perf_counter() - t0
         seeded = data.copy()
         seeded.poses = estimate
+        # the gate pass anchors node 0 only: other anchors (FIX, one per component) keep their given poses
+        anc = anchor_nodes(data)
+        given = anc[data.has_pose[anc]]
+        seeded.poses[given] = data.poses[given]
         res = solve(seeded, params.replace(init=InitMethod.GIVEN), candidates=admitted)
         res.seconds += gate_seconds
         res.init_seconds += gate_seconds
