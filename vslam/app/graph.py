@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from graph import GraphParams, optimize, read_graph, write_graph
+from graph.errors import GraphError
 from odometry.shared.atomic_io import atomic_write_text
 
 LABELS_HEADER = "edge,from,to,inlier,weight,r2"
@@ -43,7 +44,10 @@ def optimize_graph_file(path: str | Path, out: str | Path, preset: str = "defaul
     """Optimise a g2o / TORO file with a GraphParams preset and write `out` (same ids, edge order, information and
     comments); optionally the trajectory as TUM (timestamps = vertex ids) and one CSV row per loop."""
     data = read_graph(path)
-    res = optimize(data, GraphParams.preset(preset), solver=solver, robust=robust, init=init)
+    try:
+        res = optimize(data, GraphParams.preset(preset), solver=solver, robust=robust, init=init)
+    except GraphError as exc:         # the solver's errors do not know the file: name it
+        raise GraphError(f"{path}: {exc}") from exc
     write_graph(out, data, res.poses)
     lines = [f"{path}: {describe_graph(data)}",
              f"solver {res.solver}, robust {res.robust}, init {res.init}",
