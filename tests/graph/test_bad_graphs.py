@@ -108,6 +108,7 @@ def test_rtabmap_like_file_is_read_optimised_and_written_with_its_extra_records(
     out = tmp_path / "out.g2o"
     code, text = _cli("graph", "optimize", src, "--out", out, capsys=capsys)
     assert code == 0, text
+    assert "vslam graph: warning: " in text and "2 VERTEX_TRACKXYZ" in text      # once, without a traceback line
     lines = out.read_text(encoding="utf-8").splitlines()
     assert lines[0] == "PARAMS_SE3OFFSET 0 0 0 0 0 0 0 1"          # in place, BOM gone
     for kept in ("VERTEX_TRACKXYZ -1 1 1 0", "EDGE_SE3_TRACKXYZ 3 -2 0 0 1 0 100 0 0 100 0 100", "FIX 1"):
@@ -267,3 +268,13 @@ def test_write_keeps_ids_order_and_comments_of_a_disconnected_graph(tmp_path):
     out = tmp_path / "o.g2o"
     write_graph(out, d)
     assert read_graph(out).equals(d, atol=0.0)
+
+
+# ------------------------------------------------------------------------------------------- the long fuzz
+def test_graph_fuzz_is_reproducible_and_counts_every_case():
+    from vslam.bench.fuzz_graphs import OUTCOMES, fuzz_graph_files, malformed_graph
+
+    assert malformed_graph(5, 17) == malformed_graph(5, 17) != malformed_graph(5, 18)
+    counts = fuzz_graph_files(12, seed=5, hang_seconds=30.0)
+    assert sum(counts[k] for k in OUTCOMES) == 12
+    assert counts["traceback"] == 0 and counts["hang"] == 0 and counts["typed_without_file"] == 0, counts["examples"]

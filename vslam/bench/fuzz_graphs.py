@@ -28,7 +28,12 @@ import shutil
 import sys
 import tempfile
 import time
+import traceback
+import warnings
 from pathlib import Path
+
+from odometry.shared.errors import ToolkitError
+from vslam.app.graph import optimize_graph_file
 
 OUTCOMES = ("processed", "typed_error", "traceback", "hang")
 _INFO2 = [100.0, 0.0, 0.0, 100.0, 0.0, 400.0]
@@ -244,12 +249,6 @@ def case_options(seed: int, index: int) -> dict:
 
 # --------------------------------------------------------------------------------------------------- runner
 def _worker(conn) -> None:
-    import traceback
-    import warnings
-
-    from odometry.shared.errors import ToolkitError
-    from vslam.app.graph import optimize_graph_file
-
     warnings.simplefilter("ignore")
     conn.send("ready")                  # imports done: case timings do not include the start-up
     while True:
