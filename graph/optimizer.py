@@ -9,7 +9,7 @@ import numpy as np
 
 from graph import incremental
 from graph.batch import solve
-from graph.components import anchor_components
+from graph.components import anchor_components, loops_join_odometry_parts
 from graph.errors import GraphError
 from graph.factors import anchor_nodes
 from graph.model import TANGENT_DIM, PoseGraphData
@@ -57,6 +57,10 @@ def _first_line(exc: BaseException) -> str:
 def _optimize(data: PoseGraphData, params: GraphParams) -> GraphResult:
     if params.solver == Solver.ISAM2:
         return incremental.full_pass(data, params)
+    if params.robust != RobustMode.NONE and params.gate_loops and data.num_loops and loops_join_odometry_parts(data):
+        res = solve(data, params)
+        res.notes.insert(0, "loops are the only link between parts of the odometry chain: solved without the gate")
+        return res
     if params.robust != RobustMode.NONE and params.gate_loops and data.num_loops:
         t0 = time.perf_counter()
         try:
