@@ -43,7 +43,8 @@ class HorizonParams(Config):
     sample_mode: SampleMode = SampleMode.COLUMN
     bands: int = setting(1, range="[1, inf)",
                          doc="bands of band_height rows stacked around the horizon row, matched band by band "
-                             "(loops.horizon.bands; 1 = the paper's single band)")
+                             "by loops.horizon.bands (extract_bands / match_bands); extract_features, the landmark "
+                             "memory and `vslam horizon` read the horizon row's band only")
 
     # --- detector (paper §3) ---
     octaves: int = setting(4, range="[1, inf)")

@@ -151,3 +151,12 @@ def test_standalone_loops_on_a_printed_floor_join_no_non_overlapping_places(tmp_
     bad_app, _ = no_overlap(tmp_path / "appearance")
     assert bad_app > 0          # the floor does fool appearance alone
     assert bad_gated == 0 and n_gated > 0
+
+
+def test_across_an_unmeasured_step_the_gate_leaves_the_decision_to_appearance():
+    cam = camera()
+    odo = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    v_false = FixedLoop(cam, np.array([0.4, 0.0])).verify(None, None)
+    assert not MotionGate(cam, PathDriftMotion(odo))(0, 2, v_false)
+    lost = np.array([False, True, False])     # VO lost frame 1: the motion 0 -> 2 is unknown
+    assert MotionGate(cam, PathDriftMotion(odo, unknown=lost))(0, 2, v_false)

@@ -52,16 +52,25 @@ class GateResult:
 
 class PathDriftMotion:
     """Relative motion and a drift-proportional covariance from poses without covariance (e.g. a TUM trajectory
-    of `vslam odometry`): sigma grows with the path length travelled between the two keyframes."""
+    of `vslam odometry`): sigma grows with the path length travelled between the two keyframes. `unknown` (N,)
+    marks frames whose motion from the previous frame was not measured (VO LOST): across one, the relative motion
+    is unknown and the covariance is made so large that the gate leaves the decision to appearance."""
 
-    def __init__(self, poses: np.ndarray, params: MotionGateParams | None = None):
+    UNKNOWN_SIGMA = 1e6    # m / rad: "no information"
+
+    def __init__(self, poses: np.ndarray, params: MotionGateParams | None = None, unknown: np.ndarray | None = None):
         self.poses = np.asarray(poses, float).reshape(-1, 3)
         self.params = params or MotionGateParams()
         steps = np.linalg.norm(np.diff(self.poses[:, :2], axis=0), axis=1)
         self.arc = np.concatenate([[0.0], np.cumsum(steps)])
+        u = np.zeros(len(self.poses), bool) if unknown is None else np.asarray(unknown, bool).reshape(-1)
+        self.unknown_before = np.cumsum(u)     # unknown steps up to and including each frame
 
     def __call__(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
         p = self.params
+        lo, hi = min(a, b), max(a, b)
+        if self.unknown_before[hi] - self.unknown_before[lo] > 0:
+            return between(self.poses[a], self.poses[b]), np.eye(3) * self.UNKNOWN_SIGMA ** 2
         length = abs(float(self.arc[b] - self.arc[a]))
         s_xy = p.floor_sigma_m + p.drift_fraction * length
         s_th = p.drift_rad_per_m * max(length, p.floor_sigma_m)

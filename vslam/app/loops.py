@@ -26,7 +26,7 @@ from loops.cdvs.model import LoopModel
 from odometry.fusion import FusionConfig
 from odometry.shared.atomic_io import atomic_write_text
 from odometry.shared.tum import read_tum
-from odometry.vo import VOConfig, run_visual_odometry
+from odometry.vo import VOConfig, VOStatus, run_visual_odometry
 from vslam.app.loop_gate import MotionGate, MotionGateParams, PathDriftMotion
 from vslam.app.odometry import fuse_sequence_odometry
 from vslam.errors import VslamError
@@ -77,7 +77,8 @@ def motion_source(seq: Sequence, odometry: str, gate: MotionGateParams) -> Motio
             raise VslamError(f"{seq.root or seq.name}: --odometry vo needs a downward camera (camera_height)")
         return None
     traj = run_visual_odometry(seq.camera, seq.timestamps, lambda i: seq.image(i, gray=True), VOConfig())
-    return MotionSource("vo", traj.poses, PathDriftMotion(traj.poses, gate))
+    lost = np.array([s == VOStatus.LOST for s in traj.status])   # motion not measured: the gate cannot judge
+    return MotionSource("vo", traj.poses, PathDriftMotion(traj.poses, gate, unknown=lost))
 
 
 @dataclass(frozen=True)
