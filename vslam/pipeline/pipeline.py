@@ -119,7 +119,7 @@ class Pipeline:
         cfg = self.config
         self.camera = camera
         self.vo = VisualOdometry(camera, cfg.vo)
-        self.loop_detector = build_loop_detector(cfg)
+        self.loop_detector = build_loop_detector(cfg, camera)
         self.graph = IncrementalBuilder(cfg.graph) if cfg.incremental else PoseGraphBuilder(cfg.graph)
         self.rng = np.random.default_rng(cfg.seed)
         self.timestamps: list[float] = []
@@ -224,8 +224,9 @@ class Pipeline:
         detector = self.loop_detector
         obs = detector.recognizer.observe(image)   # cdvs: the decoded compact bytes, as a robot would store them
         self.descriptor_bytes.append(int(obs.nbytes))
-        cands = detector.query(obs, key=index)
-        detector.add(index, obs)
+        stamp = float(self.timestamps[index])
+        cands = detector.query(obs, key=index, stamp=stamp)
+        detector.add(index, obs, stamp, self.poses_vo[index])   # footprint exclusion follows the VO poses
         out = []
         for c in cands:
             v = c.verification
