@@ -8,6 +8,7 @@ coloured by the back end's verdict. The file is written to a temporary name and 
 from __future__ import annotations
 
 import os
+from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,15 @@ def loop_arc(a: np.ndarray, b: np.ndarray, rise: float) -> np.ndarray:
     return np.column_stack([xy, _Z_LINES + 4.0 * top * t[:, 0] * (1.0 - t[:, 0])]).astype(np.float32)
 
 
+def loop_ring(centre: np.ndarray, radius: float, z: float) -> np.ndarray:
+    """A circle on the floor around a loop's query pose: the place of a loop stays visible when the arc is a
+    vertical line (both visits at one spot) or hidden in the camera's frustum."""
+    a = np.linspace(0.0, 2 * np.pi, 25)
+    c = np.asarray(centre, float)[:2]
+    return np.column_stack([c[0] + radius * np.cos(a), c[1] + radius * np.sin(a), np.full(len(a), z)]).astype(
+        np.float32)
+
+
 def _on_floor(xy: np.ndarray) -> np.ndarray:
     xy = np.asarray(xy, np.float32).reshape(-1, 2)
     return np.column_stack([xy, np.full(len(xy), _Z_LINES, np.float32)])
@@ -51,7 +61,11 @@ class RunRecorder:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmp = self.path.with_name(f".{self.path.name}.partial")
-        self.rec = rr.RecordingStream(application_id, recording_id=recording_id, send_properties=False)
+        # chunks cut by size, never by a wall-clock tick: the default 0.2 s tick makes the file's size depend on
+        # the machine's load (small chunks each carry their own schema)
+        batching = rr.ChunkBatcherConfig(flush_tick=timedelta(hours=1), flush_num_bytes=1 << 20)
+        self.rec = rr.RecordingStream(application_id, recording_id=recording_id, send_properties=False,
+                                      batcher_config=batching)
         self.rec.save(str(self._tmp))       # the blueprint is sent by close(), when the scene's extent is known
         self.rec.set_log_time_enabled(False)
         self.jpeg_quality = int(jpeg_quality)
@@ -206,11 +220,13 @@ class RunRecorder:
         if not segs:
             self.rec.log(path, rr.Clear(recursive=False))
             return
-        # arcs rise above the camera (which hangs camera_height above the floor) so that the frustum never hides them
-        rise = 1.3 * (self.camera.camera_height if self.camera is not None and self.camera.camera_height else 0.5)
+        h = self.camera.camera_height if self.camera is not None and self.camera.camera_height else 0.5
+        # arcs rise above the camera (which hangs h above the floor) so that the frustum never hides them
+        strips = [loop_arc(s[0], s[1], 1.3 * h) for s in segs]
+        if kind != "candidates":   # rings just above the image plane (0.02 h above the floor)
+            strips += [loop_ring(s[0], 0.25 * h, 0.03 * h) for s in segs]
         radius = 0.002 if kind == "candidates" else 0.008
-        self.rec.log(path, rr.LineStrips3D([loop_arc(s[0], s[1], rise) for s in segs],
-                                           colors=[lay.LOOP_COLOURS[kind]], radii=radius))
+        self.rec.log(path, rr.LineStrips3D(strips, colors=[lay.LOOP_COLOURS[kind]], radii=radius))
 
     def log_text(self, message: str, level: str = "INFO") -> None:
         rr = self.rr

@@ -9,7 +9,8 @@ Pinhole under the camera's transform):
     /world/robot/camera/image                Pinhole + downscaled JPEG; /keypoints and VO inlier /matches on it
     /world/trajectory/{vo,slam}/<k>          line strips; SLAM is redrawn whenever the graph is optimised
     /world/trajectory/gt                     ground truth (static), when the sequence has one
-    /world/loops/{kept,rejected}             loops accepted by the detector: kept / rejected by the robust back end
+    /world/loops/{kept,rejected}             loops accepted by the detector, kept / rejected by the robust back
+                                             end: an arc between the two poses and a ring around the query pose
     /world/loops/candidates                  verified candidates below the detector's threshold (hidden by default)
     /metrics/vo/*, /metrics/loops/*, /metrics/timing/*   time series, one plot per unit in the blueprint
     /log                                     text events (loops closed, tracking lost)
@@ -55,7 +56,7 @@ def eye_for(bounds: np.ndarray | None):
     cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
     r = max(x1 - x0, y1 - y0, 0.5)
     # from the south, about 55 degrees above the floor: the trajectory reads as a map, the frustum keeps its depth
-    return rrb.EyeControls3D(position=[cx, cy - 0.5 * r, 0.72 * r], look_target=[cx, cy + 0.05 * r, 0.0],
+    return rrb.EyeControls3D(position=[cx, cy - 0.62 * r, 0.95 * r], look_target=[cx, cy + 0.02 * r, 0.0],
                              eye_up=[0, 0, 1])
 
 

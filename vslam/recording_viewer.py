@@ -56,8 +56,12 @@ def _devtools(port: int, timeout: float = 30.0):
     return websocket.create_connection(page["webSocketDebuggerUrl"], timeout=60, suppress_origin=True)
 
 
-def screenshot(rrd: str | Path, png: str | Path, wait: float = 40.0, size: tuple[int, int] = (1600, 1000)) -> Path:
-    """Open `rrd` in Rerun's web viewer in headless Chromium, wait, and write what it shows to `png`."""
+def screenshot(rrd: str | Path, png: str | Path, wait: float = 40.0, size: tuple[int, int] = (1600, 1000),
+               settle: float = 5.0, max_wait: float = 300.0) -> Path:
+    """Open `rrd` in Rerun's web viewer in headless Chromium and write what it shows to `png` once it has loaded:
+    after `wait` seconds, shots are taken every `settle` seconds until two in a row are identical (the viewer
+    streams the file in and moves its time cursor while it loads; on a busy machine that takes minutes), or until
+    `max_wait` seconds have passed (the last shot is written then)."""
     rrd, png = Path(rrd), Path(png)
     if not rrd.is_file():
         raise VslamError(f"{rrd}: no such recording")
@@ -88,12 +92,20 @@ def screenshot(rrd: str | Path, png: str | Path, wait: float = 40.0, size: tuple
         call("Page.enable")
         source = urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc}/proxy", safe="")
         call("Page.navigate", url=f"http://127.0.0.1:{web}?url={source}")
+        t0 = time.monotonic()
         time.sleep(wait)
-        shot = call("Page.captureScreenshot", format="png")
-        if "result" not in shot:
-            raise VslamError(f"chromium gave no screenshot: {shot.get('error')}")
+        last = None
+        while True:
+            shot = call("Page.captureScreenshot", format="png")
+            if "result" not in shot:
+                raise VslamError(f"chromium gave no screenshot: {shot.get('error')}")
+            data = base64.b64decode(shot["result"]["data"])
+            if data == last or time.monotonic() - t0 > max_wait:
+                break
+            last = data
+            time.sleep(settle)
         with atomic_path(png) as tmp:
-            Path(tmp).write_bytes(base64.b64decode(shot["result"]["data"]))
+            Path(tmp).write_bytes(data)
         ws.close()
     finally:
         for proc in (browser, viewer):   # each in its own process group: end the group (the rerun wrapper forks)

@@ -62,8 +62,7 @@ def plot_loop_matrix(path: str | Path, keyframes: np.ndarray, matrix: np.ndarray
     index = {int(f): i for i, f in enumerate(keyframes)}
     k = max(len(keyframes), 1)
     fig, ax = plt.subplots(figsize=(7.2, 6.2), dpi=110)
-    cmap = plt.get_cmap("viridis").copy()
-    cmap.set_bad("0.88")
+    cmap = plt.get_cmap("viridis").with_extremes(bad="0.88")   # pairs never compared: light grey
     if matrix is not None and np.isfinite(matrix).any():
         vals = matrix[np.isfinite(matrix)]
         im = ax.imshow(np.ma.masked_invalid(matrix), cmap=cmap, interpolation="nearest", origin="upper",
