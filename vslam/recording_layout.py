@@ -56,7 +56,7 @@ def eye_for(bounds: np.ndarray | None):
     cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
     r = max(x1 - x0, y1 - y0, 0.5)
     # from the south, about 55 degrees above the floor: the trajectory reads as a map, the frustum keeps its depth
-    return rrb.EyeControls3D(position=[cx, cy - 0.62 * r, 0.95 * r], look_target=[cx, cy + 0.02 * r, 0.0],
+    return rrb.EyeControls3D(position=[cx, cy - 0.55 * r, 0.8 * r], look_target=[cx, cy + 0.03 * r, 0.0],
                              eye_up=[0, 0, 1])
 
 

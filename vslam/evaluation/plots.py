@@ -72,7 +72,7 @@ def plot_errors(path: str | Path, series: dict[str, tuple[np.ndarray, np.ndarray
     for kind, times in (loop_times or {}).items():
         c, lab = LOOP_STYLES.get(kind, ("k", kind))
         for k, t in enumerate(np.asarray(times, float)):
-            ax.axvline(t, color=c, lw=1.0, ls="--", alpha=0.8, label=f"{lab} ({len(times)})" if k == 0 else None)
+            ax.axvline(t, color=c, lw=1.4, ls="--", label=f"{lab} ({len(times)})" if k == 0 else None)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(ylabel)
     ax.set_ylim(bottom=0)
