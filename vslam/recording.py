@@ -221,11 +221,12 @@ class RunRecorder:
             self.rec.log(path, rr.Clear(recursive=False))
             return
         h = self.camera.camera_height if self.camera is not None and self.camera.camera_height else 0.5
-        # arcs rise above the camera (which hangs h above the floor) so that the frustum never hides them
-        strips = [loop_arc(s[0], s[1], 1.3 * h) for s in segs]
-        if kind != "candidates":   # rings just above the image plane (0.02 h above the floor)
-            strips += [loop_ring(s[0], 0.25 * h, 0.03 * h) for s in segs]
-        radius = 0.002 if kind == "candidates" else 0.008
+        # low arcs (a loop at one spot is a pin 0.3 h tall) with a small ring at the foot, just above the image plane
+        # (0.02 h above the floor): visible, yet dozens of them do not bury the trajectory
+        strips = [loop_arc(s[0], s[1], 0.3 * h) for s in segs]
+        if kind != "candidates":
+            strips += [loop_ring(s[0], 0.08 * h, 0.03 * h) for s in segs]
+        radius = 0.002 if kind == "candidates" else 0.005
         self.rec.log(path, rr.LineStrips3D(strips, colors=[lay.LOOP_COLOURS[kind]], radii=radius))
 
     def log_text(self, message: str, level: str = "INFO") -> None:

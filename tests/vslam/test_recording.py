@@ -115,6 +115,29 @@ def test_loops_by_verdict_with_candidates_apart(recording):
     arc = np.asarray(kept[0])
     np.testing.assert_allclose(arc[0, :2], [1.0, 0.0], atol=1e-6)    # from the query pose ...
     np.testing.assert_allclose(arc[-1, :2], [0.0, 0.0], atol=1e-6)   # ... to the match pose
-    assert arc[:, 2].max() > CAM.camera_height                       # rises above the camera: never hidden by it
+    assert arc[:, 2].max() > 0.1                                     # rises off the floor: visible from any side
     colours = _values(recording, "/world/loops/rejected", "LineStrips3D:colors")[-1]
     assert colours != _values(recording, "/world/loops/kept", "LineStrips3D:colors")[-1]
+
+
+def test_a_pipeline_run_redraws_slam_when_optimised_and_splits_loops_by_verdict(tmp_path):
+    from vslam.io import open_sequence
+    from vslam.pipeline import Pipeline, PipelineConfig
+    from vslam.sim import SimConfig, simulate
+
+    simulate(SimConfig(width=320, height=240, focal=250.0, length=4.0, laps=2, turn_radius=0.6, fps=10.0, seed=4),
+             tmp_path / "seq")
+    seq = open_sequence(tmp_path / "seq")
+    out = tmp_path / "recording.rrd"
+    rec = RunRecorder(out, seq.camera)
+    result = Pipeline(PipelineConfig(), recorder=rec).run(seq)
+    rec.close()
+    kept = [l for l in result.loops if l.accepted and l.inlier]
+    candidates = [l for l in result.loops if not l.accepted]
+    assert len(kept) >= 10                      # optimize_every = 10: the graph was optimised during the run
+    redraws = [f for f, _ in _rows(out, "/world/trajectory/slam/0", "LineStrips3D:strips")]
+    assert len(redraws) >= 3 and redraws[-1] == len(seq) - 1 and any(f < len(seq) - 1 for f in redraws[1:])
+    final = {kind: _values(out, f"/world/loops/{kind}", "LineStrips3D:strips") for kind in ("kept", "candidates")}
+    assert len(final["kept"][-1]) == 2 * len(kept)                # an arc and a ring per kept loop
+    assert len(final["candidates"][-1]) == len(candidates)        # candidates apart, not among the kept/rejected
+    assert out.stat().st_size / len(seq) <= 10_000
