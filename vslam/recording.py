@@ -15,6 +15,7 @@ import numpy as np
 
 from odometry.shared.rotations import yaw_to_quat
 from vslam import recording_layout as lay
+from vslam.evaluation.plots import start_anchored
 from vslam.recording_camera import encode_image, mount_transform, pinhole, scale_pixels, scaled_size
 
 _CHUNK = 10          # poses per trajectory segment: the drawn line lags the robot by at most this many frames
@@ -164,7 +165,8 @@ class RunRecorder:
         self._seg[which] = [pts[-1]] if len(pts) else []
 
     def log_groundtruth(self, poses: np.ndarray) -> None:
-        p = np.asarray(poses, dtype=np.float32)
+        """Ground truth (N, 3), drawn from where the estimate starts (the frame of its first valid pose)."""
+        p = start_anchored(poses).astype(np.float32)
         p = p[~np.isnan(p[:, 0])]
         if len(p) < 2:
             return

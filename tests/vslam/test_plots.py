@@ -70,3 +70,17 @@ def run_plots(tmp_path_factory):
     img = _png(root / "out" / "plots" / "loop_scores.png")
     assert _share(img, (255, 255, 255)) < 0.5       # the whole query x match grid is coloured
     return root / "out" / "plots"
+
+
+def test_ground_truth_is_drawn_from_where_the_estimate_starts():
+    """Ground truth in its own world frame (render_floor, KITTI) is expressed in the frame of its first pose: the
+    estimate starts at the origin, so an unaligned comparison measures drift, not the choice of world frame."""
+    from odometry.shared.poses import compose
+
+    est = np.column_stack([np.linspace(0, 2, 50), 0.1 * np.sin(np.linspace(0, 3, 50)), np.linspace(0, 0.5, 50)])
+    start = np.array([5.0, -2.0, 1.2])
+    gt = compose(start, est)
+    gt[3] = np.nan
+    anchored = plots.start_anchored(np.vstack([np.full((1, 3), np.nan), gt]))
+    assert np.isnan(anchored[0]).all() and np.isnan(anchored[4]).all()
+    np.testing.assert_allclose(np.delete(anchored[1:], 3, axis=0), np.delete(est, 3, axis=0), atol=1e-12)

@@ -7,6 +7,18 @@ from pathlib import Path
 import numpy as np
 
 from odometry.shared.atomic_io import atomic_path
+from odometry.shared.poses import between
+
+
+def start_anchored(poses: np.ndarray) -> np.ndarray:
+    """Planar poses (N, 3) expressed in the frame of the first valid one: where a run's estimate starts (at the
+    origin). Ground truth in its own world frame (render_floor, KITTI, TUM) is then drawn over the estimate instead of
+    beside it; rows with NaN stay NaN."""
+    p = np.asarray(poses, dtype=float)
+    ok = np.flatnonzero(np.all(np.isfinite(p[:, :3]), axis=1)) if len(p) else []
+    if len(ok) == 0:
+        return p.copy()
+    return between(p[ok[0], :3], p[:, :3])
 
 
 def pyplot():

@@ -68,7 +68,7 @@ def _plots(result, out: Path, seq) -> None:
     pdir.mkdir(exist_ok=True)
     trajs = {}
     if seq is not None and seq.groundtruth is not None:
-        trajs["ground truth"] = seq.groundtruth_planar()[: len(result.timestamps)]
+        trajs["ground truth"] = plots.start_anchored(seq.groundtruth_planar()[: len(result.timestamps)])
     trajs["VO"] = result.poses_vo
     trajs["SLAM"] = result.poses_slam
     p = result.poses_slam
@@ -82,12 +82,12 @@ def _plots(result, out: Path, seq) -> None:
         plot_loop_matrix(pdir / "loop_scores.png", result.keyframes, matrix, marks,
                          title=f"{result.sequence}: retrieval similarity of each query keyframe to the stored ones")
     if seq is not None and seq.groundtruth is not None:
-        gt = seq.groundtruth_planar()[: len(result.timestamps)]
+        gt = plots.start_anchored(seq.groundtruth_planar()[: len(result.timestamps)])
         ok = ~np.isnan(gt[:, 0])
         t = result.timestamps - result.timestamps[0]
         series = {name: (t[ok], np.linalg.norm(pp[ok, :2] - gt[ok, :2], axis=1))
                   for name, pp in (("VO", result.poses_vo), ("SLAM", result.poses_slam))}
         times = {"accepted": [t[l.query_frame] for l in result.loops if l.accepted and l.inlier],
                  "outlier": [t[l.query_frame] for l in result.loops if l.accepted and not l.inlier]}
-        plots.plot_errors(pdir / "error_over_time.png", series, ylabel="position error, unaligned (m)",
+        plots.plot_errors(pdir / "error_over_time.png", series, ylabel="position error, from a common start (m)",
                           loop_times=times, title=f"{result.sequence}: position error against ground truth")
