@@ -18,6 +18,7 @@ import argparse
 import importlib
 import pkgutil
 import sys
+import warnings
 from types import ModuleType
 
 import vslam.cli as cli_package
@@ -54,6 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     args.command_line = list(sys.argv[1:] if argv is None else argv)   # how the run was asked for (bench docs)
+    # warnings (skipped frames, decoder complaints naming the file, evaluation problems) as one line each
+    warnings.showwarning = lambda message, category, *_a, **_k: print(
+        f"vslam {args.command}: warning: {message}", file=sys.stderr)
     try:
         return int(args.func(args) or 0)
     except BrokenPipeError:  # output piped into `head` and closed: not an error

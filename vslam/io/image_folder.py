@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 
 from vslam.errors import VslamError
+from vslam.image_file import read_image_file
 from vslam.io.sequence_dir import read_sequence_dir
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
@@ -30,10 +31,9 @@ def list_images(folder: str | Path) -> list[tuple[str, Path]]:
 
 
 def read_image(path: Path) -> np.ndarray:
-    """An image file as 8-bit grey or BGR (deeper images scaled to 0-255, alpha dropped); OSError names the file."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise OSError(f"{path}: cannot read image")
+    """An image file as 8-bit grey or BGR (deeper images scaled to 0-255, alpha dropped); ImageReadError names the
+    file (missing, truncated, corrupt)."""
+    img = read_image_file(path, cv2.IMREAD_UNCHANGED)
     if img.dtype != "uint8":
         img = cv2.convertScaleAbs(img, alpha=255.0 / max(float(img.max()), 1.0))
     if img.ndim == 3 and img.shape[2] == 4:

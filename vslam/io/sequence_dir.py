@@ -29,6 +29,7 @@ from vslam.errors import (
     SequenceError,
     TimestampOrderError,
 )
+from vslam.image_file import read_image_file
 from vslam.io.csvstreams import format_csv, read_csv_columns
 from vslam.sequence import FileImages, GyroStream, Sequence, Trajectory, WheelOdometry
 
@@ -173,8 +174,11 @@ def _check_images(listing: Path, images: FileImages, mode: str) -> None:
         p = images.path(i)
         if not p.is_file():
             raise ImageReadError(listing, f"image file {p} is missing", line=i + 2, field="image")
-        if mode == "decode" and cv2.imread(str(p), cv2.IMREAD_UNCHANGED) is None:
-            raise ImageReadError(listing, f"image file {p} cannot be decoded", line=i + 2, field="image")
+        if mode == "decode":
+            try:
+                read_image_file(p, cv2.IMREAD_UNCHANGED)
+            except ImageReadError as exc:
+                raise ImageReadError(listing, f"image file {p}: {exc.problem}", line=i + 2, field="image") from None
 
 
 # ---------------------------------------------------------------------------------------------------- writing
