@@ -7,14 +7,14 @@ and a key image's score is the maximum over the three (eq. 2).
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
 
 from .database import BowDatabase, EmptyMemoryError
-from .features import brief_angles, extract
+from .features import NoFeaturesError, brief_angles, extract
 from .fileformat import VocabFileError, load_arrays, save_arrays
 from .params import VocabParams
 from .tree import VocabularyTree, build_tree
@@ -73,6 +73,8 @@ class VisualMemory:
     angles: tuple[float, ...]
     trees: tuple[VocabularyTree, ...]
     databases: tuple[BowDatabase, ...]
+    # key images kept without descriptors (no features, e.g. a blank wall, or unreadable): they never match
+    featureless: tuple[int, ...] = ()
 
     def __len__(self) -> int:
         return len(self.key_names)
@@ -81,23 +83,42 @@ class VisualMemory:
     @classmethod
     def build(cls, images: Iterable[np.ndarray], names: Sequence[str], params: VocabParams,
               masks: Sequence[np.ndarray | None] | None = None) -> "VisualMemory":
-        """Extract descriptors from the key images, build the vocabulary (per pattern angle) and the database."""
+        """Extract descriptors from the key images, build the vocabulary (per pattern angle) and the database.
+
+        A key image without features (a blank wall) or given as None (unreadable) stays a key that never matches;
+        their indices are the memory's `featureless`. Raises EmptyMemoryError when no key image has features."""
         angles = brief_angles(params)
-        per_angle: list[list[np.ndarray]] = [[] for _ in angles]
+        per_angle: list[list[np.ndarray | None]] = [[] for _ in angles]
         names = list(names)
+        featureless: list[int] = []
         count = 0
         for i, image in enumerate(images):
             if i >= len(names):
                 raise ValueError(f"more key images than names ({len(names)})")
             mask = masks[i] if masks is not None else None
-            for o, d in enumerate(extract(image, params, mask, angles, name=names[i])):
+            try:
+                descs = extract(image, params, mask, angles, name=names[i]) if image is not None else None
+            except NoFeaturesError:
+                descs = None
+            if descs is None:
+                featureless.append(i)
+                descs = [None] * len(angles)
+            for o, d in enumerate(descs):
                 per_angle[o].append(d)
             count += 1
         if count == 0:
             raise EmptyMemoryError("the visual memory has no key images")
         if count != len(names):
             raise ValueError(f"{count} key images for {len(names)} names")
-        return cls.from_descriptors(per_angle, names, params, angles)
+        if len(featureless) == count:
+            raise EmptyMemoryError(f"none of the {count} key images has {params.descriptor.value} features")
+        # the empty keys get empty descriptor arrays of the vocabulary's row type
+        filled = []
+        for descs in per_angle:
+            like = next(d for d in descs if d is not None)
+            filled.append([d if d is not None else like[:0] for d in descs])
+        memory = cls.from_descriptors(filled, names, params, angles)
+        return replace(memory, featureless=tuple(featureless))
 
     @classmethod
     def from_descriptors(cls, per_angle: list[list[np.ndarray]], names: Sequence[str], params: VocabParams,
@@ -156,7 +177,8 @@ class VisualMemory:
             arrays.update(tree.to_arrays(f"v{o}."))
             arrays.update(db.to_arrays(f"v{o}."))
         meta = {"kind": FILE_KIND, "params": self.params.to_dict(), "angles": list(self.angles),
-                "trees": [t.meta() for t in self.trees], "key_names": list(self.key_names)}
+                "trees": [t.meta() for t in self.trees], "key_names": list(self.key_names),
+                "featureless": list(self.featureless)}
         save_arrays(path, meta, arrays)
 
     @classmethod
@@ -170,7 +192,8 @@ class VisualMemory:
             tree = VocabularyTree.from_arrays(tm, arrays, f"v{o}.")
             trees.append(tree)
             dbs.append(BowDatabase.from_arrays(arrays, tree.n_words, params.distance, f"v{o}."))
-        return cls(params, tuple(meta["key_names"]), tuple(meta["angles"]), tuple(trees), tuple(dbs))
+        return cls(params, tuple(meta["key_names"]), tuple(meta["angles"]), tuple(trees), tuple(dbs),
+                   tuple(int(i) for i in meta.get("featureless", ())))
 
     def describe(self) -> str:
         words = ", ".join(str(t.n_words) for t in self.trees)

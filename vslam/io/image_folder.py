@@ -14,13 +14,14 @@ from vslam.io.sequence_dir import read_sequence_dir
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 
 
-def list_images(folder: str | Path) -> list[tuple[str, Path]]:
-    """(name, path) of the images of an image folder, or of a sequence directory's frames.csv, in order."""
+def list_images(folder: str | Path, check_images: str = "exists") -> list[tuple[str, Path]]:
+    """(name, path) of the images of an image folder, or of a sequence directory's frames.csv, in order;
+    `check_images` as `read_sequence_dir` ("none": listed files may be missing)."""
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"{folder}: not a directory")
     if (folder / "frames.csv").is_file():
-        seq = read_sequence_dir(folder, require_camera=False)   # validated: header, timestamps, images exist
+        seq = read_sequence_dir(folder, check_images=check_images, require_camera=False)   # validated: header, timestamps, images exist
         out = [(rel, folder / rel) for rel in seq.images.relpaths]
     else:
         out = [(str(p.relative_to(folder)), p) for p in sorted(folder.rglob("*"))
