@@ -108,12 +108,24 @@ def train_loop_model(sequences: Sequence[str | Path], out: str | Path, modes: Se
         if log is not None:
             log(f"{path}: {keyframes} keyframes, {len(ps.pairs)} pairs matched, {int(ps.usable.sum())} with a "
                 f"trustworthy label ({loops} loops), {time.perf_counter() - t0:.0f} s")
+    # a model fitted on nothing has every threshold infinite: it would silently disable loop closure
+    used, positives = sum(x["pairs_used"] for x in sources), sum(x["loop_pairs"] for x in sources)
+    names = ", ".join(str(p) for p in sequences)
+    if used == 0:
+        raise VslamError(f"{names}: no training pairs (keyframe pairs with a trustworthy odometry label); use longer "
+                         "sequences, a smaller --every or --exclude-recent, or a larger --max-sigma")
+    if positives == 0:
+        raise VslamError(f"{names}: none of the {used} training pairs is a loop (footprint overlap J >= {overlap}); "
+                         "the sequences must revisit places")
     provenance = {"command": command, "sequences": sources, "overlap_threshold": overlap,
                   "relative_motion": "odometry.fusion.fuse_wheel_gyro (wheel odometry + gyro)",
                   "every": sampling.every, "exclude_recent": sampling.exclude_recent, "shortlist": sampling.shortlist,
                   "random": sampling.random, "seed": sampling.seed, "descriptor_params_id": trained.params_id,
                   "max_sigma": sampling.max_sigma, "descriptor_preset": "CdvsParams.floor", "min_overlap": implied}
     model = fit_loop_model(scored, overlap, provenance, min_overlap=implied)
+    if not any(np.isfinite(model.threshold(m)) for m in model.curves):
+        raise VslamError(f"{names}: no mode reaches a finite loop threshold on these {used} pairs ({positives} "
+                         "loops); the model would never accept a loop, so it is not written")
     out = Path(out)
     model.save(out)
     if plot:
