@@ -40,8 +40,10 @@ class RunSummary:
 
 
 def _evaluation_lines(ev: dict) -> list[str]:
-    lines = []
+    lines = [f"  not evaluated: {p}" for p in ev.get("problems", [])]
     for name in ("vo", "slam"):
+        if name not in ev:
+            continue
         d = ev[name]
         se = d["start_to_end"]
         lines.append(f"  {name.upper():<8} ATE {d['ape_m']['rmse']:.4f} m RMSE ({d['ape_rmse_percent_of_path']:.3f} % "

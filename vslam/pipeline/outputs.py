@@ -11,7 +11,7 @@ from odometry.shared.atomic_io import atomic_write_text
 from odometry.shared.tum import write_tum
 from vslam.evaluation import plots
 from vslam.evaluation.loops import RUN_LOOPS_HEADER
-from vslam.evaluation.run_eval import evaluate_result
+from vslam.evaluation.run_eval import EVALUATION_PROBLEMS, evaluate_result, note_problem
 
 
 def _fmt(v) -> str:
@@ -55,10 +55,13 @@ def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = T
                             "initial_cost": g.initial_cost, "final_cost": g.final_cost, "iterations": g.iterations,
                             "seconds": g.seconds}
     if evaluate and sequence is not None and sequence.groundtruth is not None:
-        metrics["evaluation"] = evaluate_result(result, sequence)
-    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float) + "\n")
+        metrics["evaluation"] = evaluate_result(result, sequence)   # problems are warnings, listed in it
     if plots:
-        _plots(result, out, sequence)
+        try:
+            _plots(result, out, sequence)
+        except EVALUATION_PROBLEMS as exc:   # a plot must not cost the run's other files
+            note_problem(metrics.setdefault("problems", []), "plots", exc)
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float) + "\n")
     return out
 
 
