@@ -15,6 +15,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 
 from loops.vocab import NoFeaturesError, VisualMemory, VocabParams, evaluate
+from vslam.app.outdir import LOCALIZE_EVAL_OUTPUTS, prepare_out_dir
 from vslam.errors import SkippedInputWarning, VslamError
 from vslam.evaluation.place_recognition import RANKING_HEADER, write_csv, write_report
 from vslam.io.image_folder import list_images, read_image
@@ -115,7 +116,7 @@ def query_memory(memory_file: str | Path, images: Sequence[str | Path], top: int
 
 
 def evaluate_memory(memory_dir: str | Path, queries_dir: str | Path, truth_csv: str | Path, params: VocabParams,
-                    out: str | Path, skip_bad_frames: bool = False) -> str:
+                    out: str | Path, skip_bad_frames: bool = False, overwrite: bool = False) -> str:
     """Build a memory from the key folder, query it with every image of the query folder, score the rankings
     against TRUTH.csv and write the report files into `out` (see `write_report`). Returns report.md's text, with
     a line naming the key images kept without features (see `build_memory`); an unreadable query is a miss."""
@@ -126,8 +127,8 @@ def evaluate_memory(memory_dir: str | Path, queries_dir: str | Path, truth_csv: 
     truth = read_truth(truth_csv, query_names, key_names)
     if not truth:
         raise VslamError(f"{truth_csv}: no ground-truth rows")
+    out = prepare_out_dir(out, LOCALIZE_EVAL_OUTPUTS, overwrite)
     memory = _build(keys, params)
     ev = evaluate(memory, ((n, img, None) for (n, _), img in zip(queries, readable_images(queries, "query image"))), truth)
-    out = Path(out)
     write_report(out, ev, memory, title=f"{Path(memory_dir).name} vs {Path(queries_dir).name}")
     return (out / "report.md").read_text() + "".join(f"\n{line}" for line in skipped_lines(memory))

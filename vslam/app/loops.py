@@ -17,6 +17,7 @@ from loops.cdvs.database import DatabaseParams
 from loops.cdvs.detector import LOOPS_CSV_HEADER, detect_loops
 from loops.cdvs.model import LoopModel
 from odometry.shared.atomic_io import atomic_write_text
+from vslam.app.outdir import LOOPS_OUTPUTS, prepare_out_dir
 from vslam.errors import VslamError
 from vslam.io import open_sequence
 
@@ -40,12 +41,14 @@ class LoopsRun:
 def detect_sequence_loops(sequence: str | Path, out: str | Path, mode: int = 4, model: str | None = None,
                           threshold: float | None = None, every: int = 1, shortlist: int = 5, exclude_recent: int = 20,
                           confirmations: int = 1, geometry: str = "auto", camera: str | None = None,
-                          fps: float = 10.0, progress: Callable[[int, int], None] | None = None) -> LoopsRun:
+                          fps: float = 10.0, progress: Callable[[int, int], None] | None = None,
+                          overwrite: bool = False) -> LoopsRun:
     """Detect loops between every `every`-th frame of a sequence (descriptor `mode`, loop `model` JSON or the
     shipped one; `threshold` overrides the model's). progress(done, total) per keyframe."""
     if every < 1 or shortlist < 1 or exclude_recent < 0 or confirmations < 1:
         raise VslamError("--every, --shortlist and --confirmations must be >= 1 and --exclude-recent >= 0")
     seq = open_sequence(sequence, camera=camera, fps=fps)
+    out = prepare_out_dir(out, LOOPS_OUTPUTS, overwrite)   # before any work; non-empty refused unless overwrite
     loop_model = LoopModel.load(model) if model else LoopModel.default()
     downward = seq.camera is not None and seq.camera.camera_height is not None
     geometry_model = {"floor": GeometryModel.SIMILARITY, "general": GeometryModel.AFFINE,
@@ -68,8 +71,6 @@ def detect_sequence_loops(sequence: str | Path, out: str | Path, mode: int = 4, 
     rows, st = detect_loops(frames(), mode, params, dbp, model=loop_model, threshold=threshold,
                             on_frame=None if progress is None else (lambda k: progress(k + 1, len(indices))))
     elapsed = time.perf_counter() - t0
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "loops.csv", ",".join(LOOPS_CSV_HEADER) + "\n" + "".join(r.csv() + "\n" for r in rows))
     thr = threshold if threshold is not None else loop_model.threshold(mode)
     summary = {"sequence": str(sequence), "mode": mode, "keyframes": st.frames, "skipped_frames": st.skipped,

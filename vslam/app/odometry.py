@@ -18,6 +18,7 @@ from odometry.shared.atomic_io import atomic_write_text
 from odometry.shared.poses import between
 from odometry.shared.tum import write_tum
 from odometry.vo import VOConfig, VOStatus, VOTrajectory, run_visual_odometry
+from vslam.app.outdir import ODOMETRY_OUTPUTS, prepare_out_dir
 from vslam.errors import VslamError
 from vslam.io import open_sequence
 from vslam.sequence import Sequence as FrameSequence
@@ -68,7 +69,7 @@ class OdometryRun:
 
 def run_odometry(sequence: str | Path, out: str | Path, camera: str | None = None, preset: str = "default",
                  fusion_preset: str = "default", overrides: dict | None = None, fallback: bool = True,
-                 progress: Callable[[int, int], None] | None = None) -> OdometryRun:
+                 progress: Callable[[int, int], None] | None = None, overwrite: bool = False) -> OdometryRun:
     """Visual odometry over a sequence (VOConfig `preset` with `overrides`); wheel odometry and gyro, when present
     and `fallback`, are fused and used as the motion prediction and the fallback. progress(done, total) per frame."""
     seq = open_sequence(sequence, camera=camera)
@@ -76,8 +77,7 @@ def run_odometry(sequence: str | Path, out: str | Path, camera: str | None = Non
     if not cam.is_downward:
         raise VslamError(f"{sequence}: the camera has no camera_height; visual odometry needs a downward camera")
     config = VOConfig.from_dict(overrides or {}, base=VOConfig.preset(preset))
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_out_dir(out, ODOMETRY_OUTPUTS, overwrite)   # non-empty refused unless overwrite
     fused = None
     if seq.odometry is not None and fallback:
         fused = fuse_sequence_odometry(seq, FusionConfig.preset(fusion_preset))

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from vslam.app.outdir import RUN_OUTPUTS, prepare_out_dir
 from vslam.io import open_sequence
 from vslam.pipeline import Pipeline, PipelineConfig, PipelineResult
 from vslam.recording import RunRecorder
@@ -57,13 +58,13 @@ def _evaluation_lines(ev: dict) -> list[str]:
 
 def run_sequence(sequence: str | Path, out: str | Path, config: PipelineConfig | None = None,
                  camera: str | None = None, max_frames: int | None = None,
-                 progress: Callable[[int, int], None] | None = None) -> RunSummary:
+                 progress: Callable[[int, int], None] | None = None, overwrite: bool = False) -> RunSummary:
     """Run SLAM on a sequence (any layout `vslam.io.open_sequence` reads) and write every output into `out`; the
-    Rerun recording (out/recording.rrd) when the config's recording is enabled. progress(done, total) per frame."""
+    Rerun recording (out/recording.rrd) when the config's recording is enabled. progress(done, total) per frame.
+    A non-empty `out` is refused unless `overwrite` (see `vslam.app.outdir`)."""
     config = config or PipelineConfig()
     seq = open_sequence(sequence, camera=camera)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_out_dir(out, RUN_OUTPUTS, overwrite)
     recorder = None
     if config.recording.enabled:
         recorder = RunRecorder(out / "recording.rrd", seq.camera, recording_id=f"vslam-{seq.name}",

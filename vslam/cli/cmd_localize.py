@@ -71,6 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     e.add_argument("--skip-bad-frames", action="store_true",
                    help="accept frames.csv files listing missing images (a missing key never matches, a missing "
                         "query is a miss)")
+    e.add_argument("--overwrite", action="store_true",
+                   help="reuse a non-empty --out folder, removing the files eval writes (refused otherwise)")
     add_param_arguments(e, descriptor_default=None)
     e.set_defaults(func=_run_eval)
 
@@ -100,5 +102,5 @@ def _run_eval(args: argparse.Namespace) -> int:
     from vslam.app.localize import evaluate_memory
 
     print(evaluate_memory(args.memory_dir, args.queries_dir, args.truth, params_from_args(args), args.out,
-                          skip_bad_frames=args.skip_bad_frames))
+                          skip_bad_frames=args.skip_bad_frames, overwrite=args.overwrite))
     return 0

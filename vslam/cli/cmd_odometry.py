@@ -23,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a VOConfig field, e.g. --set max_features=300 (repeatable)")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--overwrite", action="store_true",
+                   help="reuse a non-empty --out folder, removing the files this command writes (refused otherwise)")
 
 
 def _frame_counter(done: int, total: int) -> None:
@@ -36,7 +38,8 @@ def run(args: argparse.Namespace) -> int:
 
     res = run_odometry(args.sequence, args.out, camera=args.camera, preset=args.preset,
                        fusion_preset=args.fusion_preset, overrides=parse_overrides(args.set),
-                       fallback=not args.no_fallback, progress=None if args.quiet else _frame_counter)
+                       fallback=not args.no_fallback, progress=None if args.quiet else _frame_counter,
+                       overwrite=args.overwrite)
     if not args.quiet:
         print(file=sys.stderr)
     print(res.summary())

@@ -28,6 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-frames", type=int, help="process only the first N frames")
     p.add_argument("--print-config", action="store_true", help="print the effective configuration as YAML and exit")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.add_argument("--overwrite", action="store_true",
+                   help="reuse a non-empty --out folder, removing the files a run writes (refused otherwise)")
 
 
 def build_config(a: argparse.Namespace):
@@ -59,7 +61,8 @@ def run(a: argparse.Namespace) -> int:
         print(cfg.dumps(), end="")
         return 0
     bar = Progress(0, label="vslam run", enabled=None if not a.quiet else False)
-    summary = run_sequence(a.sequence, a.out, cfg, camera=a.camera, max_frames=a.max_frames, progress=bar.update)
+    summary = run_sequence(a.sequence, a.out, cfg, camera=a.camera, max_frames=a.max_frames, progress=bar.update,
+                           overwrite=a.overwrite)
     bar.close()
     if not a.quiet:
         print(summary.format())
