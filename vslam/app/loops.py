@@ -20,6 +20,7 @@ from odometry.shared.atomic_io import atomic_write_text
 from vslam.app.outdir import LOOPS_OUTPUTS, prepare_out_dir
 from vslam.errors import VslamError
 from vslam.io import open_sequence
+from vslam.io.bad_frames import check_mode
 
 GEOMETRIES = ("auto", "floor", "general")
 
@@ -42,12 +43,13 @@ def detect_sequence_loops(sequence: str | Path, out: str | Path, mode: int = 4, 
                           threshold: float | None = None, every: int = 1, shortlist: int = 5, exclude_recent: int = 20,
                           confirmations: int = 1, geometry: str = "auto", camera: str | None = None,
                           fps: float = 10.0, progress: Callable[[int, int], None] | None = None,
-                          overwrite: bool = False) -> LoopsRun:
+                          overwrite: bool = False, skip_bad_frames: bool = False) -> LoopsRun:
     """Detect loops between every `every`-th frame of a sequence (descriptor `mode`, loop `model` JSON or the
-    shipped one; `threshold` overrides the model's). progress(done, total) per keyframe."""
+    shipped one; `threshold` overrides the model's). progress(done, total) per keyframe. A frames.csv listing a
+    missing image is refused unless `skip_bad_frames`; unreadable frames are skipped and listed in summary.json."""
     if every < 1 or shortlist < 1 or exclude_recent < 0 or confirmations < 1:
         raise VslamError("--every, --shortlist and --confirmations must be >= 1 and --exclude-recent >= 0")
-    seq = open_sequence(sequence, camera=camera, fps=fps)
+    seq = open_sequence(sequence, camera=camera, fps=fps, check_images=check_mode(skip_bad_frames))
     out = prepare_out_dir(out, LOOPS_OUTPUTS, overwrite)   # before any work; non-empty refused unless overwrite
     loop_model = LoopModel.load(model) if model else LoopModel.default()
     downward = seq.camera is not None and seq.camera.camera_height is not None
@@ -63,7 +65,7 @@ def detect_sequence_loops(sequence: str | Path, out: str | Path, mode: int = 4, 
         for i in indices:
             try:
                 yield i, seq.image(i, gray=True)
-            except ValueError as exc:  # an unreadable frame is skipped, not fatal
+            except (ValueError, OSError) as exc:  # an unreadable frame is skipped, not fatal
                 warnings.append(str(exc))
                 yield i, None
 

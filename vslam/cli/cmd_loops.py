@@ -31,6 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera", help="camera.yaml to use (image folders and videos)")
     p.add_argument("--fps", type=float, default=10.0, help="frame rate for image folders without timestamps")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--skip-bad-frames", action="store_true",
+                   help="accept missing/corrupt images: warn, continue, flag the frame (default: a missing image "
+                        "listed in frames.csv is an error)")
     p.add_argument("--overwrite", action="store_true",
                    help="reuse a non-empty --out folder, removing the files this command writes (refused otherwise)")
 
@@ -42,7 +45,8 @@ def run(a: argparse.Namespace) -> int:
     res = detect_sequence_loops(a.sequence, a.out, mode=a.mode, model=a.model, threshold=a.threshold, every=a.every,
                                 shortlist=a.shortlist, exclude_recent=a.exclude_recent,
                                 confirmations=a.confirmations, geometry=a.geometry, camera=a.camera, fps=a.fps,
-                                progress=bar.update, overwrite=a.overwrite)
+                                progress=bar.update, overwrite=a.overwrite,
+                                skip_bad_frames=a.skip_bad_frames)
     bar.close()
     for w in res.warnings[:5]:
         print(f"vslam loops: warning: skipped unreadable frame: {w}", file=sys.stderr)

@@ -28,6 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-frames", type=int, help="process only the first N frames")
     p.add_argument("--print-config", action="store_true", help="print the effective configuration as YAML and exit")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.add_argument("--skip-bad-frames", action="store_true",
+                   help="accept missing/corrupt images: warn, continue, flag the frame (default: a missing image "
+                        "listed in frames.csv is an error)")
     p.add_argument("--overwrite", action="store_true",
                    help="reuse a non-empty --out folder, removing the files a run writes (refused otherwise)")
 
@@ -62,7 +65,7 @@ def run(a: argparse.Namespace) -> int:
         return 0
     bar = Progress(0, label="vslam run", enabled=None if not a.quiet else False)
     summary = run_sequence(a.sequence, a.out, cfg, camera=a.camera, max_frames=a.max_frames, progress=bar.update,
-                           overwrite=a.overwrite)
+                           overwrite=a.overwrite, skip_bad_frames=a.skip_bad_frames)
     bar.close()
     if not a.quiet:
         print(summary.format())

@@ -32,9 +32,11 @@ def loops_csv_text(loops) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = True, plots: bool = True) -> Path:
+def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = True, plots: bool = True,
+                  bad_frames: list[dict] | None = None) -> Path:
     """All files of a run in `out_dir` (each written atomically). With a sequence that has ground truth, metrics.json
-    also holds ATE/RPE (SE(2) alignment), the start-to-end error and loop precision/recall."""
+    also holds ATE/RPE (SE(2) alignment), the start-to-end error and loop precision/recall. `bad_frames` (frames
+    that could not be read: index, file, problem) go into run.json and their count into metrics.json."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t = result.timestamps
@@ -46,9 +48,9 @@ def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = T
     run_info = {"sequence": str(Path(result.sequence).resolve()) if result.sequence else None,
                 "camera": result.camera.to_dict(), "keyframes": result.keyframes.tolist(),
                 "loop_min_separation": int(result.config.database_params().exclude_recent) + 1,
-                "config": result.config.to_dict()}
+                "config": result.config.to_dict(), "bad_frames": list(bad_frames or [])}
     atomic_write_text(out / "run.json", json.dumps(run_info, indent=1) + "\n")
-    metrics = {"summary": result.summary()}
+    metrics = {"summary": {**result.summary(), "bad_frames": len(bad_frames or [])}}
     if result.graph_result is not None:
         g = result.graph_result
         metrics["graph"] = {"nodes": int(len(g.node_ids)), "loops_kept": g.loops_kept, "loops_rejected": g.loops_rejected,
