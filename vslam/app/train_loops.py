@@ -8,6 +8,7 @@ overlap J of keyframe pairs from those poses, and loop = J >= r (seed 001 §III)
 from __future__ import annotations
 
 import time
+import warnings
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +29,7 @@ from loops.cdvs.model import LoopModel
 from loops.cdvs.plots import plot_loop_model
 from loops.cdvs.trained import TrainedParams, load_trained
 from vslam.app.odometry import fuse_sequence_odometry
-from vslam.errors import VslamError
+from vslam.errors import SkippedInputWarning, VslamError
 from vslam.io import open_sequence
 
 
@@ -124,8 +125,10 @@ def train_loop_model(sequences: Sequence[str | Path], out: str | Path, modes: Se
                   "max_sigma": sampling.max_sigma, "descriptor_preset": "CdvsParams.floor", "min_overlap": implied}
     model = fit_loop_model(scored, overlap, provenance, min_overlap=implied)
     if not any(np.isfinite(model.threshold(m)) for m in model.curves):
-        raise VslamError(f"{names}: no mode reaches a finite loop threshold on these {used} pairs ({positives} "
-                         "loops); the model would never accept a loop, so it is not written")
+        # a fit, but one that accepts no loop: written (it is what the data says), never silently
+        warnings.warn(SkippedInputWarning(
+            f"{names}: no mode reaches a finite loop threshold on these {used} pairs ({positives} loops): "
+            "this model accepts no loop; train on more revisits"), stacklevel=2)
     out = Path(out)
     model.save(out)
     if plot:

@@ -97,7 +97,7 @@ def _image_bytes(rng: random.Random, w: int = 64, h: int = 48, ext: str = ".png"
     return buf.tobytes()
 
 
-def _mutate_text(rng: random.Random, text: str) -> str:
+def mutate_text(rng: random.Random, text: str) -> str:
     """One textual mutation of a small file: a line dropped, duplicated or swapped, a cell replaced by a hostile
     token, characters inserted or deleted, the file truncated."""
     lines = text.split("\n")
@@ -132,9 +132,10 @@ def _mutate_text(rng: random.Random, text: str) -> str:
     return "\n".join(lines)
 
 
-def sequence_folder(rng: random.Random, root: Path, n_frames: int = 3) -> Path:
+def sequence_folder(rng: random.Random, root: Path, n_frames: int = 3, corrupt: bool = True) -> Path:
     """A small sequence directory (camera.yaml, frames.csv, images, odometry.csv, imu.csv, groundtruth.txt) with one
-    to three of its files broken: text mutated, an image missing, truncated, empty or not an image."""
+    to three of its files broken (unless not `corrupt`): text mutated, an image missing, truncated, empty or not an
+    image."""
     root.mkdir(parents=True, exist_ok=True)
     (root / "images").mkdir(exist_ok=True)
     files = {"camera.yaml": CAMERA_YAML}
@@ -148,7 +149,7 @@ def sequence_folder(rng: random.Random, root: Path, n_frames: int = 3) -> Path:
     files["odometry.csv"] = "timestamp,v,omega\n" + "".join(f"{t:.3f},0.1,0.0\n" for t in ts)
     files["imu.csv"] = "timestamp,gyro_z\n" + "".join(f"{t:.3f},0.0\n" for t in ts)
     files["groundtruth.txt"] = "".join(f"{t:.3f} {0.01 * i:.3f} 0 0 0 0 0 1\n" for i, t in enumerate(ts))
-    for _ in range(rng.randint(1, 3)):
+    for _ in range(rng.randint(1, 3) if corrupt else 0):
         target = rng.choice(list(files) + ["image"])
         if target == "image":
             p = root / f"images/{rng.randrange(n_frames):06d}.png"
@@ -165,7 +166,7 @@ def sequence_folder(rng: random.Random, root: Path, n_frames: int = 3) -> Path:
         elif rng.random() < 0.1:
             files.pop(target)
         else:
-            files[target] = _mutate_text(rng, files[target])
+            files[target] = mutate_text(rng, files[target])
     for name, text in files.items():
         (root / name).write_text(text, encoding="utf-8", errors="surrogatepass")
     return root
@@ -177,5 +178,5 @@ def config_text(rng: random.Random, valid_yaml: str) -> str:
     a line dropped or duplicated, characters inserted."""
     text = valid_yaml
     for _ in range(rng.randint(1, 3)):
-        text = _mutate_text(rng, text)
+        text = mutate_text(rng, text)
     return text

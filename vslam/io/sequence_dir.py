@@ -160,7 +160,8 @@ def read_groundtruth(path: Path) -> Trajectory:
         raise SequenceError(path, str(exc).split(": ", 1)[-1]) from None
     bad = np.nonzero(np.diff(t) <= 0)[0]
     if len(bad):
-        raise TimestampOrderError(path, f"timestamp {t[bad[0] + 1]!r} does not increase (previous {t[bad[0]]!r})",
+        raise TimestampOrderError(path, f"timestamp {float(t[bad[0] + 1])!r} does not increase "
+                                        f"(previous {float(t[bad[0]])!r})",
                                   field="timestamp")
     return Trajectory(t, p)
 
