@@ -13,6 +13,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from odometry.shared.errors import ToolkitError
+
 from .database import BowDatabase, EmptyMemoryError
 from .features import NoFeaturesError, brief_angles, extract
 from .fileformat import VocabFileError, load_arrays, save_arrays
@@ -20,6 +22,25 @@ from .params import VocabParams
 from .tree import VocabularyTree, build_tree
 
 FILE_KIND = "vslam-visual-memory"
+
+
+def check_tree(tree: VocabularyTree, params: VocabParams) -> None:
+    """A vocabulary read from a file fits the memory's parameters (raises VocabFileError)."""
+    if tree.k != params.k or tree.depth != params.depth:
+        raise VocabFileError(f"vocabulary k={tree.k} L={tree.depth}, parameters k={params.k} L={params.depth}")
+    if tree.centres.ndim != 2 or tree.children.ndim != 2 or tree.word.ndim != 1 or len(tree.centres) == 0:
+        raise VocabFileError("vocabulary arrays have the wrong number of dimensions")
+    if tree.children.min(initial=0) < -1 or not np.issubdtype(tree.children.dtype, np.integer):
+        raise VocabFileError("vocabulary child ids out of range")
+
+
+def check_counts(arrays: dict[str, np.ndarray], prefix: str, n_keys: int) -> None:
+    """The word counts of a database read from a file are consistent with its key images (VocabFileError)."""
+    ptr, word, n = (arrays[f"{prefix}{k}"] for k in ("counts_ptr", "counts_word", "counts_n"))
+    if ptr.ndim != 1 or word.ndim != 1 or n.ndim != 1 or len(ptr) != n_keys + 1 or len(word) != len(n):
+        raise VocabFileError(f"database of {len(ptr) - 1} key images for {n_keys} names")
+    if ptr[0] != 0 or ptr[-1] != len(word) or np.any(np.diff(ptr) < 0) or np.any(n <= 0):
+        raise VocabFileError("database word counts are inconsistent")
 
 
 def vocabulary_seed(params: VocabParams, o: int) -> int:
@@ -154,6 +175,10 @@ class VisualMemory:
         return self.query_descriptors(extract(image, self.params, mask, (0.0,), name=name)[0])
 
     def query_descriptors(self, descriptors: np.ndarray) -> Ranking:
+        dim = self.trees[0].centres.shape[1]
+        if descriptors.ndim != 2 or descriptors.shape[1] != dim:
+            raise VocabFileError(f"descriptors of {descriptors.shape[-1]} values do not fit the memory's "
+                                 f"{dim}-value vocabulary (memory file damaged or of other parameters)")
         return merge_max([db.score(tree.transform(descriptors), self.params.min_shared_words)
                           for tree, db in zip(self.trees, self.databases)])
 
@@ -183,17 +208,52 @@ class VisualMemory:
 
     @classmethod
     def load(cls, path: str | Path) -> "VisualMemory":
+        """Read a memory file; anything inconsistent in it is a VocabFileError naming the file."""
         meta, arrays = load_arrays(path)
         if meta.get("kind") != FILE_KIND:
             raise VocabFileError(f"{path}: not a visual memory file (kind {meta.get('kind')!r})")
+        try:
+            memory = cls._from_file(meta, arrays)
+        except VocabFileError as exc:
+            raise VocabFileError(f"{path}: {exc}") from None
+        except (ToolkitError, KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+            # the JSON header is not under the file's checksum: a hand-edited or damaged one lands here
+            raise VocabFileError(f"{path}: invalid visual memory file ({type(exc).__name__}: {exc})") from None
+        return memory
+
+    @classmethod
+    def _from_file(cls, meta: dict, arrays: dict[str, np.ndarray]) -> "VisualMemory":
         params = VocabParams.from_dict(meta["params"])
+        names = meta["key_names"]
+        angles = meta["angles"]
+        featureless = meta.get("featureless", [])
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names) or not names:
+            raise VocabFileError("key_names must be a non-empty list of names")
+        if not isinstance(angles, list) or not all(isinstance(a, (int, float)) and not isinstance(a, bool)
+                                                   and np.isfinite(a) for a in angles):
+            raise VocabFileError("angles must be a list of finite numbers")
+        if tuple(float(a) for a in angles) != tuple(float(a) for a in brief_angles(params)):
+            raise VocabFileError(f"angles {angles} do not match the parameters {list(brief_angles(params))}")
+        if not isinstance(meta["trees"], list) or len(meta["trees"]) != len(angles):
+            raise VocabFileError(f"{len(angles)} pattern angles need as many vocabularies")
+        if not isinstance(featureless, list) or not all(isinstance(i, int) and 0 <= i < len(names)
+                                                        for i in featureless):
+            raise VocabFileError("featureless must list key image indices")
         trees, dbs = [], []
         for o, tm in enumerate(meta["trees"]):
+            for key in ("children", "word", "counts_ptr", "counts_word", "counts_n"):
+                if not np.issubdtype(arrays[f"v{o}.{key}"].dtype, np.signedinteger):
+                    raise VocabFileError(f"array v{o}.{key} must hold signed integers")
             tree = VocabularyTree.from_arrays(tm, arrays, f"v{o}.")
+            check_tree(tree, params)
+            db = BowDatabase.from_arrays(arrays, tree.n_words, params.distance, f"v{o}.")
+            check_counts(arrays, f"v{o}.", len(names))
             trees.append(tree)
-            dbs.append(BowDatabase.from_arrays(arrays, tree.n_words, params.distance, f"v{o}."))
-        return cls(params, tuple(meta["key_names"]), tuple(meta["angles"]), tuple(trees), tuple(dbs),
-                   tuple(int(i) for i in meta.get("featureless", ())))
+            dbs.append(db)
+        if len({t.centres.shape[1] for t in trees}) != 1 or len({t.kind for t in trees}) != 1:
+            raise VocabFileError("the vocabularies of one memory must share their descriptor kind and length")
+        return cls(params, tuple(names), tuple(float(a) for a in angles), tuple(trees), tuple(dbs),
+                   tuple(featureless))
 
     def describe(self) -> str:
         words = ", ".join(str(t.n_words) for t in self.trees)
