@@ -89,7 +89,7 @@ class VocabParams(Config):
     min_image_side: int = setting(0, range="[0, 20000]", unit="px",
                                   doc="upscale smaller images so their shorter side reaches this (0 = never)")
     brief_patch: int = setting(48, range="[8, 1024]", unit="px", doc="BRIEF patch side (paper: 48)")
-    brief_sigma: float = setting(2.0, range="[0, inf)", unit="px", doc="Gaussian smoothing before the BRIEF tests")
+    brief_sigma: float = setting(2.0, range="[0, 100]", unit="px", doc="Gaussian smoothing before the BRIEF tests")
     brief_pattern_seed: int = setting(1234, range="[0, inf)")   # fixed: vocabularies built with one pattern only
     #                                                             work with that pattern
     rot_theta_deg: float = setting(8.0, range="[0, 180]", unit="deg",

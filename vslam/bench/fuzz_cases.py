@@ -6,6 +6,8 @@ cases pass the outer checks (CRC, CSV header, YAML syntax) and reach the validat
 """
 from __future__ import annotations
 
+import copy
+import json
 import random
 import struct
 import zlib
@@ -180,3 +182,67 @@ def config_text(rng: random.Random, valid_yaml: str) -> str:
     for _ in range(rng.randint(1, 3)):
         text = mutate_text(rng, text)
     return text
+
+
+# ---- JSON documents and binary files with a JSON header ----------------------------------------------------------
+HOSTILE_JSON_VALUES = (None, -1, 0, 1, 2, 10**9, -(10**9), 1.5, float("nan"), float("inf"), "x", "", [], {}, True,
+                       [1, 2], [-1], "<u1", "|u1", "<f8", [[1]], 2**70)
+
+
+def json_paths(x, path: tuple = ()) -> list[tuple]:
+    """Paths to every leaf (and every container) of a JSON document."""
+    out = [path]
+    if isinstance(x, dict):
+        for k, v in x.items():
+            out += json_paths(v, path + (k,))
+    elif isinstance(x, list):
+        for i, v in enumerate(x):
+            out += json_paths(v, path + (i,))
+    return out
+
+
+def mutate_json(rng: random.Random, doc, n: int | None = None):
+    """A copy of a JSON document with one to three values replaced by hostile ones or deleted."""
+    doc = copy.deepcopy(doc)
+    for _ in range(n or rng.randint(1, 3)):
+        paths = [p for p in json_paths(doc) if p]
+        if not paths:
+            return rng.choice(HOSTILE_JSON_VALUES)
+        p = rng.choice(paths)
+        node = doc
+        for k in p[:-1]:
+            node = node[k]
+        if rng.random() < 0.15:
+            del node[p[-1]]
+        else:
+            node[p[-1]] = rng.choice(HOSTILE_JSON_VALUES)
+    return doc
+
+
+def split_array_file(buf: bytes) -> tuple[dict, bytes]:
+    """(JSON header, data) of a vocabulary/memory file (loops.vocab.fileformat layout)."""
+    (hlen,) = struct.unpack_from("<I", buf, 12)
+    start = 16 + hlen + (-(16 + hlen)) % 64
+    return json.loads(buf[16:16 + hlen]), buf[start:]
+
+
+def join_array_file(header: dict, data: bytes) -> bytes:
+    """Reassemble a vocabulary/memory file around a (changed) header: the data and its checksum stay valid."""
+    hb = json.dumps(header).encode()
+    head = b"VSLMVOC\0" + struct.pack("<II", 1, len(hb)) + hb
+    return head + b"\0" * ((-len(head)) % 64) + data
+
+
+def mutate_bytes(rng: random.Random, data: bytes) -> bytes:
+    """Bytes flipped, a slice cut out, or the tail cut off."""
+    b = bytearray(data)
+    op = rng.randrange(3)
+    if op == 0 and b:
+        for _ in range(rng.randint(1, 8)):
+            b[rng.randrange(len(b))] = rng.randrange(256)
+    elif op == 1 and b:
+        i = rng.randrange(len(b))
+        del b[i:i + rng.randint(1, 64)]
+    else:
+        b = b[: rng.randrange(len(b) + 1)]
+    return bytes(b)
