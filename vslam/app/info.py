@@ -30,7 +30,9 @@ def sequence_summary(seq: Sequence) -> str:
     lines.append(f"odometry   {len(seq.odometry)} samples" if seq.odometry is not None else "odometry   absent")
     lines.append(f"imu        {len(seq.imu)} samples" if seq.imu is not None else "imu        absent")
     if seq.groundtruth is not None:
-        lines.append(f"groundtruth {len(seq.groundtruth)} poses, path length {seq.path_length():.2f} m")
+        length = seq.path_length()   # None for a single pose
+        lines.append(f"groundtruth {len(seq.groundtruth)} poses, path length "
+                     + (f"{length:.2f} m" if length is not None else "n/a"))
     else:
         lines.append("groundtruth absent")
     return "\n".join(lines)

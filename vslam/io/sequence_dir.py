@@ -12,6 +12,7 @@ import math
 import os
 import shutil
 import tempfile
+import warnings
 from pathlib import Path
 
 import cv2
@@ -27,6 +28,7 @@ from vslam.errors import (
     ImageReadError,
     MissingFileError,
     SequenceError,
+    SkippedInputWarning,
     TimestampOrderError,
 )
 from vslam.image_file import read_image_file
@@ -143,14 +145,22 @@ def read_sequence_dir(root: str | os.PathLike, check_images: str = "exists", req
     odo = imu = gt = None
     if (root / ODOMETRY_FILE).exists():
         c = read_csv_columns(root / ODOMETRY_FILE, ODOMETRY_HEADER)
-        odo = WheelOdometry(c["timestamp"], c["v"], c["omega"])
+        odo = WheelOdometry(c["timestamp"], c["v"], c["omega"]) if _has_rows(root / ODOMETRY_FILE, c) else None
     if (root / IMU_FILE).exists():
         c = read_csv_columns(root / IMU_FILE, IMU_HEADER)
-        imu = GyroStream(c["timestamp"], c["gyro_z"])
+        imu = GyroStream(c["timestamp"], c["gyro_z"]) if _has_rows(root / IMU_FILE, c) else None
     if (root / GROUNDTRUTH_FILE).exists():
         gt = read_groundtruth(root / GROUNDTRUTH_FILE)
     return Sequence(timestamps=frames["timestamp"], images=images, camera=camera, odometry=odo, imu=imu,
                     groundtruth=gt, root=root, name=root.name, format="sequence")
+
+
+def _has_rows(path: Path, columns: dict) -> bool:
+    """A stream file with a header and no samples is read as absent, with a warning naming it."""
+    if len(columns["timestamp"]):
+        return True
+    warnings.warn(SkippedInputWarning(f"{path}: no samples (header only): the stream is ignored"), stacklevel=3)
+    return False
 
 
 def read_groundtruth(path: Path) -> Trajectory:
