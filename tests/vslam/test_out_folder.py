@@ -76,7 +76,7 @@ def test_a_read_only_folder_is_refused(tmp_path):
 
 def test_sigterm_leaves_no_partial_recording(tmp_path):
     seq = tmp_path / "long"
-    assert main(["simulate", str(seq), "--frames", "300", "--quiet"]) == 0
+    assert main(["simulate", str(seq), "--frames", "150", "--quiet"]) == 0
     out = tmp_path / "out"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen([sys.executable, "-m", "vslam", "run", str(seq), "--out", str(out), "--quiet"],
