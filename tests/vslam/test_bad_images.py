@@ -80,3 +80,13 @@ def test_complete_files_are_not_flagged():
         ok, buf = cv2.imencode(ext, texture(2))
         assert truncation_problem(buf.tobytes()) is None
     assert truncation_problem(np.zeros(10, np.uint8).tobytes()) is None   # not JPEG/PNG: left to the decoder
+
+
+def test_info_decode_on_an_image_folder_names_the_truncated_file(tmp_path, capsys):
+    root = jpeg_sequence(tmp_path / "s")
+    (root / "frames.csv").unlink()          # a plain image folder now
+    (root / "camera.yaml").rename(tmp_path / "camera.yaml")
+    cut_to_a_third(root / "img" / "1.jpg")
+    assert main(["info", str(root / "img"), "--camera", str(tmp_path / "camera.yaml")]) == 0
+    assert main(["info", str(root / "img"), "--camera", str(tmp_path / "camera.yaml"), "--decode"]) == 2
+    assert "1.jpg: truncated JPEG" in capsys.readouterr().err

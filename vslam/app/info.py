@@ -42,4 +42,7 @@ def describe_sequence(path: str | Path, camera: str | None = None, fps: float = 
     """Open (and so validate) a sequence and summarise it; `decode` reads every image (finds corrupt files).
     Invalid input raises a SequenceError naming the file, line and field."""
     seq = open_sequence(path, camera=camera, fps=fps, check_images="decode" if decode else "exists")
+    if decode and seq.format != "sequence":   # sequence directories were decoded while opening
+        for i in range(len(seq)):
+            seq.image(i)                     # ImageReadError names the file (truncated, corrupt, missing)
     return sequence_summary(seq)
