@@ -226,7 +226,7 @@ def run(args: argparse.Namespace) -> BenchResult:
                         float("nan"), graphs.get("max_seconds", float("nan"))])
     table = format_table(["input", "cases", *OUTCOMES, "typed error not naming the file", "median ms", "max s"], rows)
     note = "" if graphs is not None or n["graphs"] == 0 else \
-        "\n(pose-graph files: vslam.bench.fuzz_graphs is not installed here)\n"
+        "\n\n(pose-graph files: vslam.bench.fuzz_graphs is not installed here)\n"
     print(table + note)
     payload = {"seed": args.seed, "hang_seconds": hang, "kill_seconds": kill,
                **{t.name: t.to_dict() for t in tallies}, "pose-graph files": graphs}
