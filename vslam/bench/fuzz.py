@@ -223,7 +223,7 @@ def run(args: argparse.Namespace) -> BenchResult:
     if graphs is not None:
         rows.insert(3, ["pose-graph files", graphs.get("cases", n["graphs"]),
                         *(graphs.get(k, 0) for k in OUTCOMES), graphs.get("typed_without_file", 0),
-                        float("nan"), graphs.get("max_seconds", float("nan"))])
+                        "n/a", graphs.get("max_seconds", "n/a")])   # fuzz_graphs reports no median
     table = format_table(["input", "cases", *OUTCOMES, "typed error not naming the file", "median ms", "max s"], rows)
     note = "" if graphs is not None or n["graphs"] == 0 else \
         "\n\n(pose-graph files: vslam.bench.fuzz_graphs is not installed here)\n"
