@@ -57,3 +57,8 @@ class ImageReadError(SequenceError):
 
 class EmptySequenceError(SequenceError):
     """A sequence with no frames."""
+
+
+class SkippedInputWarning(UserWarning):
+    """Input skipped with the run going on (an unreadable frame, a key image without features, an evaluation that
+    cannot be computed); the message names the file."""

@@ -17,6 +17,7 @@ from odometry.shared.camera import CameraModel
 from odometry.shared.poses import wrap_angle
 from odometry.shared.tum import tum_to_se2
 from vslam.errors import ImageReadError, VslamError
+from vslam.image_file import read_image_file
 
 
 @dataclass(frozen=True)
@@ -118,13 +119,8 @@ class FileImages:
         return str(self.path(index))
 
     def read(self, index: int, gray: bool = False) -> np.ndarray:
-        p = self.path(index)
-        flag = cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR
-        img = cv2.imread(str(p), flag) if p.is_file() else None
-        if img is None:
-            problem = "image file is missing" if not p.exists() else "image cannot be decoded (corrupt or not an image)"
-            raise ImageReadError(p, problem)
-        return img
+        # truncated files are refused, decoder warnings name the file (vslam.image_file)
+        return read_image_file(self.path(index), cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
 
 
 class VideoImages:

@@ -36,6 +36,9 @@ _HEADER = struct.Struct(">2sBBHHHHHBBBBBBHH")
 HEADER_SIZE = _HEADER.size
 CRC_SIZE = 4
 MAX_RICE_K = 24
+# Upper bound on local features in one descriptor. The encoder never writes more (the modes keep at most 300), and
+# the decoder refuses more: all-pairs matching is quadratic in this number, so a crafted header must not set it.
+MAX_LOCAL = 2048
 
 
 class DescriptorDecodeError(LoopsError):
@@ -105,7 +108,7 @@ def encode_features(feats: Features, params: CdvsParams, trained: TrainedParams,
     dbytes = mp.desc_bits // 8
     avail = mp.budget - fixed
     blocks = _block_indices(feats.xy, feats.proc_size, mp.coord_block)
-    n_max = min(len(blocks), mp.max_local, avail // dbytes)
+    n_max = min(len(blocks), mp.max_local, MAX_LOCAL, avail // dbytes)
 
     def cost(n: int) -> int:
         return _coord_bytes(np.sort(blocks[:n]))[0] + n * dbytes if n else 0
@@ -153,7 +156,7 @@ def encode(image: np.ndarray, mode: int, params: CdvsParams | None = None,
 def extract(image: np.ndarray, mode: int, params: CdvsParams | None = None,
             trained: TrainedParams | None = None) -> Descriptor:
     """encode + decode: the descriptor exactly as a receiver of the bytes sees it."""
-    return decode(encode(image, mode, params, trained))
+    return decode(encode(image, mode, params, trained), trained)
 
 
 def encode_all_modes(image: np.ndarray, modes=MODES, params: dict[int, CdvsParams] | None = None,
@@ -166,8 +169,13 @@ def encode_all_modes(image: np.ndarray, modes=MODES, params: dict[int, CdvsParam
     return {m: encode_features(feats, params[m], trained, sig) for m in modes}
 
 
-def decode(data: bytes) -> Descriptor:
-    """Bytes -> Descriptor; raises DescriptorDecodeError naming what is wrong."""
+def decode(data: bytes, trained: TrainedParams | None = None) -> Descriptor:
+    """Bytes -> Descriptor; raises DescriptorDecodeError naming what is wrong.
+
+    Every header field is checked against the format and, for a descriptor made with the `trained` parameters
+    (default: the shipped ones; same params id), against them (codebook size K), so that a decoded descriptor can
+    be matched without further checks. A descriptor of other trained parameters decodes too; `match` refuses to
+    compare it with one of different parameters."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise DescriptorDecodeError(f"expected bytes, got {type(data).__name__}")
     data = bytes(data)
@@ -197,8 +205,16 @@ def decode(data: bytes) -> Descriptor:
         raise DescriptorDecodeError(f"{len(data)} bytes exceed the mode {mode} budget of {BUDGETS[mode]}")
     if min(ow, oh, pw, ph) == 0 or pw > ow or ph > oh:
         raise DescriptorDecodeError(f"invalid image sizes {ow}x{oh} -> {pw}x{ph}")
-    if not 1 <= dbytes <= N_BITS // 8 and n > 0:
-        raise DescriptorDecodeError(f"invalid local descriptor length {dbytes} bytes")
+    if not 1 <= dbytes <= N_BITS // 8:
+        raise DescriptorDecodeError(f"invalid local descriptor length {dbytes} bytes (1..{N_BITS // 8})")
+    if n > MAX_LOCAL:
+        raise DescriptorDecodeError(f"{n} local features, at most {MAX_LOCAL} are allowed")
+    if k_clusters == 0:
+        raise DescriptorDecodeError("codebook size K is 0")
+    trained = trained or load_trained()
+    if params_id == trained.params_id and k_clusters != trained.n_clusters:
+        raise DescriptorDecodeError(f"codebook size K = {k_clusters} in the header, the trained parameters "
+                                    f"{params_id:#06x} have K = {trained.n_clusters}")
     if block == 0 or rk > MAX_RICE_K or flags != 0:
         raise DescriptorDecodeError(f"invalid coordinate coding (block {block}, rice {rk}, flags {flags})")
     if n_vis > k_clusters:

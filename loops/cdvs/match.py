@@ -110,6 +110,9 @@ def match(a: Descriptor, b: Descriptor, params: MatchParams | None = None,
     if a.params_id != b.params_id:
         raise IncompatibleDescriptorsError(f"descriptors come from different trained parameters "
                                            f"({a.params_id:#06x} vs {b.params_id:#06x})")
+    if a.global_visited.shape != b.global_visited.shape:   # same params id, different K: a forged header
+        raise IncompatibleDescriptorsError(f"descriptors have codebooks of different sizes "
+                                           f"({a.global_visited.shape[0]} vs {b.global_visited.shape[0]})")
     p = params or MatchParams()
     trained = trained or load_trained()
     g = global_score(a.global_visited, a.global_bits, b.global_visited, b.global_bits, trained.global_weights)

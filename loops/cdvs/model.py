@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from loops.cdvs.params import MODES
 from loops.cdvs.trained import DATA_DIR
 from loops.errors import LoopsError
 from odometry.shared.atomic_io import atomic_write_text
@@ -132,7 +133,10 @@ class LoopModel:
         if d.get("version") != VERSION:
             raise LoopsError(f"{source}: unsupported loop model version {d.get('version')!r}")
         curves = {}
-        for key, c in (d.get("modes") or {}).items():
+        modes = d.get("modes") or {}
+        if not isinstance(modes, dict):
+            raise LoopsError(f"{source}: field 'modes' must map a mode to its curve")
+        for key, c in modes.items():
             try:
                 m = int(key)
                 edges = np.asarray(c["edges"], float)
@@ -140,16 +144,23 @@ class LoopModel:
                 pos = np.asarray(c.get("positives", np.zeros(len(prob))), float)
                 tot = np.asarray(c.get("totals", np.zeros(len(prob))), float)
                 thr = math.inf if c["threshold"] is None else float(c["threshold"])
-            except (KeyError, TypeError, ValueError) as exc:
+            except (KeyError, TypeError, ValueError, OverflowError) as exc:
                 raise LoopsError(f"{source}: mode {key}: bad or missing field ({exc})") from None
+            if m not in MODES or any(a.ndim != 1 for a in (edges, prob, pos, tot)) or len(edges) == 0 or \
+                    not (len(pos) == len(tot) == len(prob)) or not np.all(np.isfinite(edges)) or math.isnan(thr):
+                raise LoopsError(f"{source}: mode {key}: mode 1-6 with equally long finite 'edges', 'probability', "
+                                 "'positives', 'totals' lists and a number or null 'threshold' expected")
             if len(edges) != len(prob) or np.any(np.diff(edges) <= 0) or np.any((prob < 0) | (prob > 1)):
                 raise LoopsError(f"{source}: mode {key}: edges must increase and match the probabilities in [0, 1]")
             curves[m] = ModeCurve(m, edges, prob, pos, tot, thr)
         mo = d.get("min_overlap")
-        if mo is not None and not (isinstance(mo, (int, float)) and 0.0 <= mo <= 1.0):
+        if mo is not None and not (isinstance(mo, (int, float)) and not isinstance(mo, bool) and 0.0 <= mo <= 1.0):
             raise LoopsError(f"{source}: field 'min_overlap' must be null or a number in [0, 1], got {mo!r}")
-        return cls(float(d.get("overlap_threshold", 0.33)), curves, d.get("provenance", {}),
-                   None if mo is None else float(mo))
+        ot = d.get("overlap_threshold", 0.33)
+        if isinstance(ot, bool) or not isinstance(ot, (int, float)) or not 0.0 < ot <= 1.0:
+            raise LoopsError(f"{source}: field 'overlap_threshold' must be a number in (0, 1], got {ot!r}")
+        prov = d.get("provenance", {})
+        return cls(float(ot), curves, prov if isinstance(prov, dict) else {}, None if mo is None else float(mo))
 
     @classmethod
     def default(cls) -> "LoopModel":

@@ -67,11 +67,14 @@ class Evaluation:
 def evaluate(memory: VisualMemory, queries: Iterable[tuple[str, np.ndarray, np.ndarray | None]],
              truth: Mapping[str, Sequence[int]]) -> Evaluation:
     """queries yields (name, image, mask or None); truth maps a query name to its true key indices. The time per
-    query is feature extraction + scoring (image decoding excluded). A query without features is a miss."""
+    query is feature extraction + scoring (image decoding excluded). A query without features, or given as None
+    (unreadable), is a miss."""
     def ranked():
         for name, image, mask in queries:
             t0 = time.perf_counter()
             try:
+                if image is None:
+                    raise NoFeaturesError(f"{name}: unreadable image")
                 ranking, error = memory.query(image, mask, name=name), ""
             except NoFeaturesError as exc:
                 ranking, error = _EMPTY, str(exc)

@@ -68,15 +68,40 @@ def unpack_arrays(buf: bytes, source: str = "<bytes>") -> tuple[dict, dict[str, 
     data = memoryview(buf)[start:]
     if zlib.crc32(data) != header.get("crc32"):
         raise VocabFileError(f"{source}: checksum mismatch (file truncated or corrupted)")
+    # the JSON header is not under the checksum: every entry of the array table is checked before it is used
+    table, meta = header.get("arrays") if isinstance(header, dict) else None, header.get("meta") if isinstance(
+        header, dict) else None
+    if not isinstance(table, list) or not isinstance(meta, dict):
+        raise VocabFileError(f"{source}: corrupted header (no array table or meta)")
     arrays = {}
-    for e in header["arrays"]:
-        dt = np.dtype(e["dtype"])
-        count = int(np.prod(e["shape"], dtype=np.int64))
-        end = e["offset"] + count * dt.itemsize
-        if end > len(data):
-            raise VocabFileError(f"{source}: array {e['name']!r} runs past the end of the file")
-        arrays[e["name"]] = np.frombuffer(data, dtype=dt, count=count, offset=e["offset"]).reshape(e["shape"])
-    return header["meta"], arrays
+    for i, e in enumerate(table):
+        arrays.update(_array_entry(e, i, data, source))
+    return meta, arrays
+
+
+def _array_entry(e, i: int, data: memoryview, source: str) -> dict[str, np.ndarray]:
+    bad = f"{source}: corrupted header (array entry {i}"
+    if not isinstance(e, dict) or not isinstance(e.get("name"), str):
+        raise VocabFileError(f"{bad}: no name)")
+    shape, offset = e.get("shape"), e.get("offset")
+    if not isinstance(shape, list) or not all(isinstance(d, int) and not isinstance(d, bool) and d >= 0
+                                               for d in shape):
+        raise VocabFileError(f"{bad} {e['name']!r}: shape must be a list of non-negative integers)")
+    if not isinstance(offset, int) or isinstance(offset, bool) or offset < 0:
+        raise VocabFileError(f"{bad} {e['name']!r}: offset must be a non-negative integer)")
+    try:
+        dt = np.dtype(e.get("dtype"))
+    except (TypeError, ValueError):
+        dt = None
+    if dt is None or dt.kind not in "biuf" or not isinstance(e.get("dtype"), str):
+        raise VocabFileError(f"{bad} {e['name']!r}: not a numeric dtype: {e.get('dtype')!r})")
+    count = 1
+    for d in shape:
+        count *= d
+    end = offset + count * dt.itemsize
+    if end > len(data):
+        raise VocabFileError(f"{source}: array {e['name']!r} runs past the end of the file")
+    return {e["name"]: np.frombuffer(data, dtype=dt, count=count, offset=offset).reshape(shape)}
 
 
 def save_arrays(path: str | Path, meta: dict, arrays: dict[str, np.ndarray]) -> None:

@@ -7,19 +7,40 @@ and a key image's score is the maximum over the three (eq. 2).
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
 
+from odometry.shared.errors import ToolkitError
+
 from .database import BowDatabase, EmptyMemoryError
-from .features import brief_angles, extract
+from .features import NoFeaturesError, brief_angles, extract
 from .fileformat import VocabFileError, load_arrays, save_arrays
 from .params import VocabParams
 from .tree import VocabularyTree, build_tree
 
 FILE_KIND = "vslam-visual-memory"
+
+
+def check_tree(tree: VocabularyTree, params: VocabParams) -> None:
+    """A vocabulary read from a file fits the memory's parameters (raises VocabFileError)."""
+    if tree.k != params.k or tree.depth != params.depth:
+        raise VocabFileError(f"vocabulary k={tree.k} L={tree.depth}, parameters k={params.k} L={params.depth}")
+    if tree.centres.ndim != 2 or tree.children.ndim != 2 or tree.word.ndim != 1 or len(tree.centres) == 0:
+        raise VocabFileError("vocabulary arrays have the wrong number of dimensions")
+    if tree.children.min(initial=0) < -1 or not np.issubdtype(tree.children.dtype, np.integer):
+        raise VocabFileError("vocabulary child ids out of range")
+
+
+def check_counts(arrays: dict[str, np.ndarray], prefix: str, n_keys: int) -> None:
+    """The word counts of a database read from a file are consistent with its key images (VocabFileError)."""
+    ptr, word, n = (arrays[f"{prefix}{k}"] for k in ("counts_ptr", "counts_word", "counts_n"))
+    if ptr.ndim != 1 or word.ndim != 1 or n.ndim != 1 or len(ptr) != n_keys + 1 or len(word) != len(n):
+        raise VocabFileError(f"database of {len(ptr) - 1} key images for {n_keys} names")
+    if ptr[0] != 0 or ptr[-1] != len(word) or np.any(np.diff(ptr) < 0) or np.any(n <= 0):
+        raise VocabFileError("database word counts are inconsistent")
 
 
 def vocabulary_seed(params: VocabParams, o: int) -> int:
@@ -73,6 +94,8 @@ class VisualMemory:
     angles: tuple[float, ...]
     trees: tuple[VocabularyTree, ...]
     databases: tuple[BowDatabase, ...]
+    # key images kept without descriptors (no features, e.g. a blank wall, or unreadable): they never match
+    featureless: tuple[int, ...] = ()
 
     def __len__(self) -> int:
         return len(self.key_names)
@@ -81,23 +104,42 @@ class VisualMemory:
     @classmethod
     def build(cls, images: Iterable[np.ndarray], names: Sequence[str], params: VocabParams,
               masks: Sequence[np.ndarray | None] | None = None) -> "VisualMemory":
-        """Extract descriptors from the key images, build the vocabulary (per pattern angle) and the database."""
+        """Extract descriptors from the key images, build the vocabulary (per pattern angle) and the database.
+
+        A key image without features (a blank wall) or given as None (unreadable) stays a key that never matches;
+        their indices are the memory's `featureless`. Raises EmptyMemoryError when no key image has features."""
         angles = brief_angles(params)
-        per_angle: list[list[np.ndarray]] = [[] for _ in angles]
+        per_angle: list[list[np.ndarray | None]] = [[] for _ in angles]
         names = list(names)
+        featureless: list[int] = []
         count = 0
         for i, image in enumerate(images):
             if i >= len(names):
                 raise ValueError(f"more key images than names ({len(names)})")
             mask = masks[i] if masks is not None else None
-            for o, d in enumerate(extract(image, params, mask, angles, name=names[i])):
+            try:
+                descs = extract(image, params, mask, angles, name=names[i]) if image is not None else None
+            except NoFeaturesError:
+                descs = None
+            if descs is None:
+                featureless.append(i)
+                descs = [None] * len(angles)
+            for o, d in enumerate(descs):
                 per_angle[o].append(d)
             count += 1
         if count == 0:
             raise EmptyMemoryError("the visual memory has no key images")
         if count != len(names):
             raise ValueError(f"{count} key images for {len(names)} names")
-        return cls.from_descriptors(per_angle, names, params, angles)
+        if len(featureless) == count:
+            raise EmptyMemoryError(f"none of the {count} key images has {params.descriptor.value} features")
+        # the empty keys get empty descriptor arrays of the vocabulary's row type
+        filled = []
+        for descs in per_angle:
+            like = next(d for d in descs if d is not None)
+            filled.append([d if d is not None else like[:0] for d in descs])
+        memory = cls.from_descriptors(filled, names, params, angles)
+        return replace(memory, featureless=tuple(featureless))
 
     @classmethod
     def from_descriptors(cls, per_angle: list[list[np.ndarray]], names: Sequence[str], params: VocabParams,
@@ -133,6 +175,10 @@ class VisualMemory:
         return self.query_descriptors(extract(image, self.params, mask, (0.0,), name=name)[0])
 
     def query_descriptors(self, descriptors: np.ndarray) -> Ranking:
+        dim = self.trees[0].centres.shape[1]
+        if descriptors.ndim != 2 or descriptors.shape[1] != dim:
+            raise VocabFileError(f"descriptors of {descriptors.shape[-1]} values do not fit the memory's "
+                                 f"{dim}-value vocabulary (memory file damaged or of other parameters)")
         return merge_max([db.score(tree.transform(descriptors), self.params.min_shared_words)
                           for tree, db in zip(self.trees, self.databases)])
 
@@ -156,21 +202,58 @@ class VisualMemory:
             arrays.update(tree.to_arrays(f"v{o}."))
             arrays.update(db.to_arrays(f"v{o}."))
         meta = {"kind": FILE_KIND, "params": self.params.to_dict(), "angles": list(self.angles),
-                "trees": [t.meta() for t in self.trees], "key_names": list(self.key_names)}
+                "trees": [t.meta() for t in self.trees], "key_names": list(self.key_names),
+                "featureless": list(self.featureless)}
         save_arrays(path, meta, arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> "VisualMemory":
+        """Read a memory file; anything inconsistent in it is a VocabFileError naming the file."""
         meta, arrays = load_arrays(path)
         if meta.get("kind") != FILE_KIND:
             raise VocabFileError(f"{path}: not a visual memory file (kind {meta.get('kind')!r})")
+        try:
+            memory = cls._from_file(meta, arrays)
+        except VocabFileError as exc:
+            raise VocabFileError(f"{path}: {exc}") from None
+        except (ToolkitError, KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+            # the JSON header is not under the file's checksum: a hand-edited or damaged one lands here
+            raise VocabFileError(f"{path}: invalid visual memory file ({type(exc).__name__}: {exc})") from None
+        return memory
+
+    @classmethod
+    def _from_file(cls, meta: dict, arrays: dict[str, np.ndarray]) -> "VisualMemory":
         params = VocabParams.from_dict(meta["params"])
+        names = meta["key_names"]
+        angles = meta["angles"]
+        featureless = meta.get("featureless", [])
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names) or not names:
+            raise VocabFileError("key_names must be a non-empty list of names")
+        if not isinstance(angles, list) or not all(isinstance(a, (int, float)) and not isinstance(a, bool)
+                                                   and np.isfinite(a) for a in angles):
+            raise VocabFileError("angles must be a list of finite numbers")
+        if tuple(float(a) for a in angles) != tuple(float(a) for a in brief_angles(params)):
+            raise VocabFileError(f"angles {angles} do not match the parameters {list(brief_angles(params))}")
+        if not isinstance(meta["trees"], list) or len(meta["trees"]) != len(angles):
+            raise VocabFileError(f"{len(angles)} pattern angles need as many vocabularies")
+        if not isinstance(featureless, list) or not all(isinstance(i, int) and 0 <= i < len(names)
+                                                        for i in featureless):
+            raise VocabFileError("featureless must list key image indices")
         trees, dbs = [], []
         for o, tm in enumerate(meta["trees"]):
+            for key in ("children", "word", "counts_ptr", "counts_word", "counts_n"):
+                if not np.issubdtype(arrays[f"v{o}.{key}"].dtype, np.signedinteger):
+                    raise VocabFileError(f"array v{o}.{key} must hold signed integers")
             tree = VocabularyTree.from_arrays(tm, arrays, f"v{o}.")
+            check_tree(tree, params)
+            db = BowDatabase.from_arrays(arrays, tree.n_words, params.distance, f"v{o}.")
+            check_counts(arrays, f"v{o}.", len(names))
             trees.append(tree)
-            dbs.append(BowDatabase.from_arrays(arrays, tree.n_words, params.distance, f"v{o}."))
-        return cls(params, tuple(meta["key_names"]), tuple(meta["angles"]), tuple(trees), tuple(dbs))
+            dbs.append(db)
+        if len({t.centres.shape[1] for t in trees}) != 1 or len({t.kind for t in trees}) != 1:
+            raise VocabFileError("the vocabularies of one memory must share their descriptor kind and length")
+        return cls(params, tuple(names), tuple(float(a) for a in angles), tuple(trees), tuple(dbs),
+                   tuple(featureless))
 
     def describe(self) -> str:
         words = ", ".join(str(t.n_words) for t in self.trees)

@@ -85,18 +85,18 @@ class VocabParams(Config):
     distance: Distance = Distance.CHI2
     min_shared_words: int = setting(5, range="[1, inf)", doc="words a key image must share to be a candidate")
     # keypoint descriptors
-    n_features: int = setting(500, range="[1, inf)", doc="keypoints per image")
-    min_image_side: int = setting(0, range="[0, inf)", unit="px",
+    n_features: int = setting(500, range="[1, 100000]", doc="keypoints per image")
+    min_image_side: int = setting(0, range="[0, 20000]", unit="px",
                                   doc="upscale smaller images so their shorter side reaches this (0 = never)")
-    brief_patch: int = setting(48, range="[8, inf)", unit="px", doc="BRIEF patch side (paper: 48)")
-    brief_sigma: float = setting(2.0, range="[0, inf)", unit="px", doc="Gaussian smoothing before the BRIEF tests")
+    brief_patch: int = setting(48, range="[8, 1024]", unit="px", doc="BRIEF patch side (paper: 48)")
+    brief_sigma: float = setting(2.0, range="[0, 100]", unit="px", doc="Gaussian smoothing before the BRIEF tests")
     brief_pattern_seed: int = setting(1234, range="[0, inf)")   # fixed: vocabularies built with one pattern only
     #                                                             work with that pattern
     rot_theta_deg: float = setting(8.0, range="[0, 180]", unit="deg",
                                    doc="BRIEFROT angle (paper: 8 degrees, found by the Fig. 9 sweep)")
     # colour descriptors: patches of patch_fraction x the image size; H-S histogram with hs_bins x hs_bins bins
-    color_random_patches: int = setting(500, range="[1, inf)")
-    color_grid: int = setting(10, range="[1, inf)",
+    color_random_patches: int = setting(500, range="[1, 100000]")
+    color_grid: int = setting(10, range="[1, 1000]",
                               doc="partitions per axis; half-overlapping patches -> (2g-1)^2 = 361")
     color_patch_fraction: float = setting(0.1, range="(0, 1]", doc="64x48 at 640x480, as in the paper")
     hs_bins: int = setting(8, range="[2, 32]", doc="8 x 8 = 64-dimensional descriptor")

@@ -70,12 +70,25 @@ class VocabularyTree:
 
     @classmethod
     def from_arrays(cls, meta: dict, arrays: dict[str, np.ndarray], prefix: str = "") -> "VocabularyTree":
-        children = arrays[f"{prefix}children"]
-        word = arrays[f"{prefix}word"]
-        centres = arrays[f"{prefix}centres"]
+        """A vocabulary from its file arrays; anything inconsistent raises VocabFileError."""
+        names = [f"{prefix}{n}" for n in ("children", "word", "centres")]
+        if not isinstance(meta, dict) or any(n not in arrays for n in names):
+            raise VocabFileError(f"vocabulary arrays or description missing ({', '.join(names)})")
+        children, word, centres = (arrays[n] for n in names)
+        k, depth, kind = meta.get("k"), meta.get("depth"), meta.get("kind")
+        if not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in (k, depth)):
+            raise VocabFileError(f"vocabulary k={k!r} L={depth!r}: expected positive integers")
+        if kind not in [m.value for m in DescriptorKind]:
+            raise VocabFileError(f"unknown descriptor kind {kind!r}")
+        want = np.uint8 if DescriptorKind(kind) is DescriptorKind.BINARY else np.float32
+        if (children.ndim != 2 or word.ndim != 1 or centres.ndim != 2 or len(centres) == 0
+                or not np.issubdtype(children.dtype, np.signedinteger)
+                or not np.issubdtype(word.dtype, np.signedinteger) or centres.dtype != want):
+            raise VocabFileError("vocabulary arrays have the wrong types or dimensions")
         if not (len(children) == len(word) == len(centres)) or children.shape[1] != meta["k"]:
             raise VocabFileError("vocabulary arrays have inconsistent shapes")
-        if children.max(initial=-1) >= len(children) or (word >= 0).sum() != word.max(initial=-1) + 1:
+        if (children.max(initial=-1) >= len(children) or children.min(initial=-1) < -1
+                or (word >= 0).sum() != word.max(initial=-1) + 1):
             raise VocabFileError("vocabulary arrays are inconsistent (child or word ids out of range)")
         return cls(DescriptorKind(meta["kind"]), int(meta["k"]), int(meta["depth"]), centres, children, word)
 
@@ -153,4 +166,9 @@ def load_vocabulary(path) -> tuple[VocabularyTree, dict]:
     meta, arrays = load_arrays(path)
     if meta.get("kind") != VOCAB_FILE_KIND:
         raise VocabFileError(f"{path}: not a vocabulary file (kind {meta.get('kind')!r})")
-    return VocabularyTree.from_arrays(meta["tree"], arrays), meta.get("info", {})
+    try:
+        tree = VocabularyTree.from_arrays(meta.get("tree"), arrays)
+    except VocabFileError as exc:
+        raise VocabFileError(f"{path}: {exc}") from None
+    info = meta.get("info", {})
+    return tree, info if isinstance(info, dict) else {}

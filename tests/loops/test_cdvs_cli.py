@@ -62,3 +62,13 @@ def test_train_loops_on_a_small_simulated_sequence(tmp_path):
         c = m.curves[mode]
         assert c.totals.sum() > 20 and c.positives.sum() > 0   # pairs were matched and some are loops
     assert main(["train-loops", str(seq), "--out", str(out), "--modes", "0"]) == 2
+
+
+def test_train_loops_refuses_a_sequence_without_training_pairs(tmp_path, capsys):
+    seq = tmp_path / "tiny"
+    assert main(["simulate", str(seq), "--floor", "tiles", "--frames", "3", "--fps", "8", "--seed", "3",
+                 "--quiet"]) == 0
+    out = tmp_path / "model.json"
+    assert main(["train-loops", str(seq), "--out", str(out), "--modes", "2", "--quiet"]) == 2
+    assert "no training pairs" in capsys.readouterr().err
+    assert not out.exists()    # before the fix: a model with every threshold infinite, exit 0

@@ -78,8 +78,9 @@ def test_empty_memory_and_featureless_images_are_clear_errors(keys):
     with pytest.raises(EmptyMemoryError, match="no key images"):
         VisualMemory.build([], [], preset("fast"))
     blank = np.full((120, 160, 3), 90, np.uint8)
-    with pytest.raises(NoFeaturesError, match="wall.png"):
-        VisualMemory.build([keys[0], blank], ["k0", "wall.png"], preset("fast"))
+    # a key image without features (issue 15: a blank wall) is kept as a key that never matches
+    m = VisualMemory.build([keys[0], blank], ["k0", "wall.png"], preset("fast"))
+    assert m.featureless == (1,) and list(m.query(keys[0]).keys) == [0]
     memory = VisualMemory.build(keys[:3], ["a", "b", "c"], preset("fast"))
     with pytest.raises(NoFeaturesError, match="q.png"):
         memory.query(blank, name="q.png")

@@ -30,7 +30,9 @@ def sequence_summary(seq: Sequence) -> str:
     lines.append(f"odometry   {len(seq.odometry)} samples" if seq.odometry is not None else "odometry   absent")
     lines.append(f"imu        {len(seq.imu)} samples" if seq.imu is not None else "imu        absent")
     if seq.groundtruth is not None:
-        lines.append(f"groundtruth {len(seq.groundtruth)} poses, path length {seq.path_length():.2f} m")
+        length = seq.path_length()   # None for a single pose
+        lines.append(f"groundtruth {len(seq.groundtruth)} poses, path length "
+                     + (f"{length:.2f} m" if length is not None else "n/a"))
     else:
         lines.append("groundtruth absent")
     return "\n".join(lines)
@@ -40,4 +42,7 @@ def describe_sequence(path: str | Path, camera: str | None = None, fps: float = 
     """Open (and so validate) a sequence and summarise it; `decode` reads every image (finds corrupt files).
     Invalid input raises a SequenceError naming the file, line and field."""
     seq = open_sequence(path, camera=camera, fps=fps, check_images="decode" if decode else "exists")
+    if decode and seq.format != "sequence":   # sequence directories were decoded while opening
+        for i in range(len(seq)):
+            seq.image(i)                     # ImageReadError names the file (truncated, corrupt, missing)
     return sequence_summary(seq)

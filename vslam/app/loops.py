@@ -29,8 +29,10 @@ from odometry.shared.tum import read_tum
 from odometry.vo import VOConfig, VOStatus, run_visual_odometry
 from vslam.app.loop_gate import MotionGate, MotionGateParams, PathDriftMotion
 from vslam.app.odometry import fuse_sequence_odometry
+from vslam.app.outdir import LOOPS_OUTPUTS, prepare_out_dir
 from vslam.errors import VslamError
 from vslam.io import open_sequence
+from vslam.io.bad_frames import check_mode
 from vslam.sequence import Sequence, Trajectory
 
 GEOMETRIES = ("auto", "floor", "general")
@@ -100,17 +102,21 @@ def detect_sequence_loops(sequence: str | Path, out: str | Path, mode: int = 4, 
                           confirmations: int = 1, geometry: str = "auto", camera: str | None = None,
                           fps: float = 10.0, progress: Callable[[int, int], None] | None = None,
                           exclude_seconds: float = 2.0, odometry: str = "auto", appearance_only: bool = False,
-                          gate: MotionGateParams | None = None) -> LoopsRun:
+                          gate: MotionGateParams | None = None, overwrite: bool = False,
+                          skip_bad_frames: bool = False) -> LoopsRun:
     """Detect loops between every `every`-th frame of a sequence (descriptor `mode`, loop `model` JSON or the
     shipped one; `threshold` overrides the model's). progress(done, total) per keyframe.
 
     Keyframes taken less than `exclude_seconds` before the query, and the `exclude_recent` last ones, are never
     candidates. `odometry` (auto, wheel, vo, none, or a TUM trajectory file) gives the poses for the footprint
-    exclusion and the motion gate; `appearance_only` ignores odometry (time and count exclusion only)."""
+    exclusion and the motion gate; `appearance_only` ignores odometry (time and count exclusion only). A frames.csv
+    listing a missing image is refused unless `skip_bad_frames`; unreadable frames are skipped and listed in
+    summary.json."""
     if every < 1 or shortlist < 1 or exclude_recent < 0 or confirmations < 1 or exclude_seconds < 0:
         raise VslamError("--every, --shortlist and --confirmations must be >= 1 and --exclude-recent, "
                          "--exclude-seconds >= 0")
-    seq = open_sequence(sequence, camera=camera, fps=fps)
+    seq = open_sequence(sequence, camera=camera, fps=fps, check_images=check_mode(skip_bad_frames))
+    out = prepare_out_dir(out, LOOPS_OUTPUTS, overwrite)   # before any work; non-empty refused unless overwrite
     gate_params = gate or MotionGateParams()
     motion = None if appearance_only else motion_source(seq, odometry, gate_params)
     loop_model = LoopModel.load(model) if model else LoopModel.default()
@@ -130,7 +136,7 @@ def detect_sequence_loops(sequence: str | Path, out: str | Path, mode: int = 4, 
         for i in indices:
             try:
                 yield i, seq.image(i, gray=True)
-            except ValueError as exc:  # an unreadable frame is skipped, not fatal
+            except (ValueError, OSError) as exc:  # an unreadable frame is skipped, not fatal
                 warnings.append(str(exc))
                 yield i, None
 
@@ -140,8 +146,6 @@ def detect_sequence_loops(sequence: str | Path, out: str | Path, mode: int = 4, 
                             stamps=np.asarray(seq.timestamps, float), poses=None if motion is None else motion.poses,
                             camera=footprint, gate=gate_fn)
     elapsed = time.perf_counter() - t0
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "loops.csv", ",".join(LOOPS_CSV_HEADER) + "\n" + "".join(r.csv() + "\n" for r in rows))
     thr = threshold if threshold is not None else loop_model.threshold(mode)
     summary = {"sequence": str(sequence), "mode": mode, "keyframes": st.frames, "skipped_frames": st.skipped,

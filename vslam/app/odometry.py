@@ -18,8 +18,10 @@ from odometry.shared.atomic_io import atomic_write_text
 from odometry.shared.poses import between
 from odometry.shared.tum import write_tum
 from odometry.vo import VOConfig, VOStatus, VOTrajectory, run_visual_odometry
+from vslam.app.outdir import ODOMETRY_OUTPUTS, prepare_out_dir
 from vslam.errors import VslamError
 from vslam.io import open_sequence
+from vslam.io.bad_frames import check_mode, note_bad_frames
 from vslam.sequence import Sequence as FrameSequence
 
 
@@ -51,6 +53,7 @@ class OdometryRun:
     trajectory: VOTrajectory
     end_error_m: float | None       # end-point error against ground truth, when the sequence has it
     path_length_m: float | None
+    bad_frames: tuple[dict, ...] = ()   # frames that could not be read (index, file, problem)
 
     def summary(self) -> str:
         traj = self.trajectory
@@ -60,6 +63,8 @@ class OdometryRun:
         msg = (f"{n} frames: {counts[VOStatus.OK]} by vision, {counts[VOStatus.FALLBACK]} fallback, "
                f"{counts[VOStatus.LOST]} lost; {int(traj.is_keyframe.sum())} keyframes; VO step {vo_ms:.2f} ms/frame "
                f"(median); wrote {self.out / 'trajectory_vo.txt'} and {self.out / 'odometry.csv'}")
+        if self.bad_frames:
+            msg += f"; {len(self.bad_frames)} unreadable frames (flagged in odometry.csv)"
         if self.end_error_m is not None:
             err, dist = self.end_error_m, self.path_length_m
             msg += f"; end-point error {err * 100:.1f} cm over {dist:.1f} m ({err / dist * 100:.2f} %)"
@@ -68,16 +73,19 @@ class OdometryRun:
 
 def run_odometry(sequence: str | Path, out: str | Path, camera: str | None = None, preset: str = "default",
                  fusion_preset: str = "default", overrides: dict | None = None, fallback: bool = True,
-                 progress: Callable[[int, int], None] | None = None) -> OdometryRun:
+                 progress: Callable[[int, int], None] | None = None, overwrite: bool = False,
+                 skip_bad_frames: bool = False) -> OdometryRun:
     """Visual odometry over a sequence (VOConfig `preset` with `overrides`); wheel odometry and gyro, when present
-    and `fallback`, are fused and used as the motion prediction and the fallback. progress(done, total) per frame."""
-    seq = open_sequence(sequence, camera=camera)
+    and `fallback`, are fused and used as the motion prediction and the fallback. progress(done, total) per frame.
+    A frames.csv listing a missing image is refused unless `skip_bad_frames`; a frame that cannot be read is a
+    failed frame (fallback), warned about, its reason in odometry.csv."""
+    seq = open_sequence(sequence, camera=camera, check_images=check_mode(skip_bad_frames))
+    noted = note_bad_frames(seq)
     cam = seq.require_camera()
     if not cam.is_downward:
         raise VslamError(f"{sequence}: the camera has no camera_height; visual odometry needs a downward camera")
     config = VOConfig.from_dict(overrides or {}, base=VOConfig.preset(preset))
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_out_dir(out, ODOMETRY_OUTPUTS, overwrite)   # non-empty refused unless overwrite
     fused = None
     if seq.odometry is not None and fallback:
         fused = fuse_sequence_odometry(seq, FusionConfig.preset(fusion_preset))
@@ -89,7 +97,7 @@ def run_odometry(sequence: str | Path, out: str | Path, camera: str | None = Non
     write_tum(out / "trajectory_vo.txt", traj.timestamps, traj.poses)
     atomic_write_text(out / "odometry.csv", "\n".join(traj.csv_rows()) + "\n")
     err, dist = _end_point_error(seq, traj.poses)
-    return OdometryRun(out, traj, err, dist)
+    return OdometryRun(out, traj, err, dist, tuple(noted.rows()))
 
 
 def _end_point_error(seq: FrameSequence, poses: np.ndarray) -> tuple[float | None, float | None]:

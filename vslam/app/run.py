@@ -7,7 +7,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from vslam.app.outdir import RUN_OUTPUTS, prepare_out_dir
 from vslam.io import open_sequence
+from vslam.io.bad_frames import check_mode, note_bad_frames
 from vslam.pipeline import Pipeline, PipelineConfig, PipelineResult
 from vslam.recording import RunRecorder
 
@@ -40,8 +42,10 @@ class RunSummary:
 
 
 def _evaluation_lines(ev: dict) -> list[str]:
-    lines = []
+    lines = [f"  not evaluated: {p}" for p in ev.get("problems", [])]
     for name in ("vo", "slam"):
+        if name not in ev:
+            continue
         d = ev[name]
         se = d["start_to_end"]
         lines.append(f"  {name.upper():<8} ATE {d['ape_m']['rmse']:.4f} m RMSE ({d['ape_rmse_percent_of_path']:.3f} % "
@@ -55,13 +59,16 @@ def _evaluation_lines(ev: dict) -> list[str]:
 
 def run_sequence(sequence: str | Path, out: str | Path, config: PipelineConfig | None = None,
                  camera: str | None = None, max_frames: int | None = None,
-                 progress: Callable[[int, int], None] | None = None) -> RunSummary:
+                 progress: Callable[[int, int], None] | None = None, overwrite: bool = False,
+                 skip_bad_frames: bool = False) -> RunSummary:
     """Run SLAM on a sequence (any layout `vslam.io.open_sequence` reads) and write every output into `out`; the
-    Rerun recording (out/recording.rrd) when the config's recording is enabled. progress(done, total) per frame."""
+    Rerun recording (out/recording.rrd) when the config's recording is enabled. progress(done, total) per frame.
+    A non-empty `out` is refused unless `overwrite` (see `vslam.app.outdir`). A frames.csv listing a missing
+    image is refused unless `skip_bad_frames`; unreadable frames are warned about and listed in run.json."""
     config = config or PipelineConfig()
-    seq = open_sequence(sequence, camera=camera)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    seq = open_sequence(sequence, camera=camera, check_images=check_mode(skip_bad_frames))
+    noted = note_bad_frames(seq)
+    out = prepare_out_dir(out, RUN_OUTPUTS, overwrite)
     recorder = None
     if config.recording.enabled:
         recorder = RunRecorder(out / "recording.rrd", seq.camera, recording_id=f"vslam-{seq.name}",
@@ -75,6 +82,6 @@ def run_sequence(sequence: str | Path, out: str | Path, config: PipelineConfig |
         raise
     if recorder is not None:
         recorder.close()
-    result.write(out, sequence=seq)
+    result.write(out, sequence=seq, bad_frames=noted.rows())
     metrics = json.loads((out / "metrics.json").read_text())
     return RunSummary(result, out, metrics.get("evaluation"))

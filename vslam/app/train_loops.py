@@ -8,6 +8,7 @@ overlap J of keyframe pairs from those poses, and loop = J >= r (seed 001 §III)
 from __future__ import annotations
 
 import time
+import warnings
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +29,7 @@ from loops.cdvs.model import LoopModel
 from loops.cdvs.plots import plot_loop_model
 from loops.cdvs.trained import TrainedParams, load_trained
 from vslam.app.odometry import fuse_sequence_odometry
-from vslam.errors import VslamError
+from vslam.errors import SkippedInputWarning, VslamError
 from vslam.io import open_sequence
 
 
@@ -108,12 +109,26 @@ def train_loop_model(sequences: Sequence[str | Path], out: str | Path, modes: Se
         if log is not None:
             log(f"{path}: {keyframes} keyframes, {len(ps.pairs)} pairs matched, {int(ps.usable.sum())} with a "
                 f"trustworthy label ({loops} loops), {time.perf_counter() - t0:.0f} s")
+    # a model fitted on nothing has every threshold infinite: it would silently disable loop closure
+    used, positives = sum(x["pairs_used"] for x in sources), sum(x["loop_pairs"] for x in sources)
+    names = ", ".join(str(p) for p in sequences)
+    if used == 0:
+        raise VslamError(f"{names}: no training pairs (keyframe pairs with a trustworthy odometry label); use longer "
+                         "sequences, a smaller --every or --exclude-recent, or a larger --max-sigma")
+    if positives == 0:
+        raise VslamError(f"{names}: none of the {used} training pairs is a loop (footprint overlap J >= {overlap}); "
+                         "the sequences must revisit places")
     provenance = {"command": command, "sequences": sources, "overlap_threshold": overlap,
                   "relative_motion": "odometry.fusion.fuse_wheel_gyro (wheel odometry + gyro)",
                   "every": sampling.every, "exclude_recent": sampling.exclude_recent, "shortlist": sampling.shortlist,
                   "random": sampling.random, "seed": sampling.seed, "descriptor_params_id": trained.params_id,
                   "max_sigma": sampling.max_sigma, "descriptor_preset": "CdvsParams.floor", "min_overlap": implied}
     model = fit_loop_model(scored, overlap, provenance, min_overlap=implied)
+    if not any(np.isfinite(model.threshold(m)) for m in model.curves):
+        # a fit, but one that accepts no loop: written (it is what the data says), never silently
+        warnings.warn(SkippedInputWarning(
+            f"{names}: no mode reaches a finite loop threshold on these {used} pairs ({positives} loops): "
+            "this model accepts no loop; train on more revisits"), stacklevel=2)
     out = Path(out)
     model.save(out)
     if plot:

@@ -28,6 +28,9 @@ class Benchmark:
 BENCHMARKS: dict[str, Benchmark] = {b.name: b for b in (
     Benchmark("descriptors", "vslam.bench.descriptors",
               "compact descriptors (modes 1-6) vs OpenCV SIFT: size, speed, query scaling, loop P/R, 48 real pairs"),
+    Benchmark("fuzz", "vslam.bench.fuzz",
+              "hostile inputs: malformed descriptor blobs, sequence folders, configs and graph files; counts of "
+              "processed / typed error / traceback / hang"),
     Benchmark("graph", "vslam.bench.graph",
               "pose-graph back end: solve times, iSAM2 pass, robustness to injected false loops (tables + JSON)"),
     Benchmark("horizon", "vslam.bench.horizon",

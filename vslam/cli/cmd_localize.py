@@ -51,6 +51,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     b = sub.add_parser("build", help="build a visual memory file from key images")
     b.add_argument("memory_dir", help="image folder or sequence directory holding the key images")
     b.add_argument("--out", help="output file (default: ./<folder>.<descriptor>.vmem)")
+    b.add_argument("--skip-bad-frames", action="store_true",
+                   help="accept a frames.csv listing missing images (kept as keys that never match, with a warning)")
     add_param_arguments(b)
     b.set_defaults(func=_run_build)
 
@@ -66,6 +68,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     e.add_argument("queries_dir", help="query images: image folder or sequence directory")
     e.add_argument("--truth", required=True, help="CSV with header query,key (image names)")
     e.add_argument("--out", required=True, help="output folder: ranking.csv, per_query.csv, report.md, metrics.json")
+    e.add_argument("--skip-bad-frames", action="store_true",
+                   help="accept frames.csv files listing missing images (a missing key never matches, a missing "
+                        "query is a miss)")
+    e.add_argument("--overwrite", action="store_true",
+                   help="reuse a non-empty --out folder, removing the files eval writes (refused otherwise)")
     add_param_arguments(e, descriptor_default=None)
     e.set_defaults(func=_run_eval)
 
@@ -77,7 +84,8 @@ def run(args: argparse.Namespace) -> int:  # pragma: no cover - argparse dispatc
 def _run_build(args: argparse.Namespace) -> int:
     from vslam.app.localize import build_memory  # on use: keeps `vslam --help` fast (see vslam.cli.main)
 
-    print(build_memory(args.memory_dir, params_from_args(args), args.out).summary())
+    print(build_memory(args.memory_dir, params_from_args(args), args.out,
+                       skip_bad_frames=args.skip_bad_frames).summary())
     return 0
 
 
@@ -93,5 +101,6 @@ def _run_eval(args: argparse.Namespace) -> int:
         raise VslamError("--descriptor is required for eval")
     from vslam.app.localize import evaluate_memory
 
-    print(evaluate_memory(args.memory_dir, args.queries_dir, args.truth, params_from_args(args), args.out))
+    print(evaluate_memory(args.memory_dir, args.queries_dir, args.truth, params_from_args(args), args.out,
+                          skip_bad_frames=args.skip_bad_frames, overwrite=args.overwrite))
     return 0

@@ -41,6 +41,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera", help="camera.yaml to use (image folders and videos)")
     p.add_argument("--fps", type=float, default=10.0, help="frame rate for image folders without timestamps")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--skip-bad-frames", action="store_true",
+                   help="accept missing/corrupt images: warn, continue, flag the frame (default: a missing image "
+                        "listed in frames.csv is an error)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="reuse a non-empty --out folder, removing the files this command writes (refused otherwise)")
 
 
 def run(a: argparse.Namespace) -> int:
@@ -52,7 +57,8 @@ def run(a: argparse.Namespace) -> int:
                                 shortlist=a.shortlist, exclude_recent=a.exclude_recent,
                                 confirmations=a.confirmations, geometry=a.geometry, camera=a.camera, fps=a.fps,
                                 progress=bar.update, exclude_seconds=a.exclude_seconds, odometry=a.odometry,
-                                appearance_only=a.appearance_only, gate=MotionGateParams(chi2=a.gate_chi2))
+                                appearance_only=a.appearance_only, gate=MotionGateParams(chi2=a.gate_chi2),
+                                overwrite=a.overwrite, skip_bad_frames=a.skip_bad_frames)
     bar.close()
     for w in res.warnings[:5]:
         print(f"vslam loops: warning: skipped unreadable frame: {w}", file=sys.stderr)

@@ -24,6 +24,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a VOConfig field, e.g. --set max_features=300 (repeatable)")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--skip-bad-frames", action="store_true",
+                   help="accept missing/corrupt images: warn, continue, flag the frame (default: a missing image "
+                        "listed in frames.csv is an error)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="reuse a non-empty --out folder, removing the files this command writes (refused otherwise)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -32,7 +37,8 @@ def run(args: argparse.Namespace) -> int:
     bar = Progress(0, label="vslam odometry", enabled=None if not args.quiet else False)
     res = run_odometry(args.sequence, args.out, camera=args.camera, preset=args.preset,
                        fusion_preset=args.fusion_preset, overrides=parse_overrides(args.set),
-                       fallback=not args.no_fallback, progress=bar.update)
+                       fallback=not args.no_fallback, progress=bar.update,
+                       overwrite=args.overwrite, skip_bad_frames=args.skip_bad_frames)
     bar.close()
     print(res.summary())
     return 0

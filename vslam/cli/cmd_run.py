@@ -33,6 +33,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true",
                    help="print the run summary as one JSON object on stdout (metrics.json's content plus the output "
                         "directory); progress still goes to stderr")
+    p.add_argument("--skip-bad-frames", action="store_true",
+                   help="accept missing/corrupt images: warn, continue, flag the frame (default: a missing image "
+                        "listed in frames.csv is an error)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="reuse a non-empty --out folder, removing the files a run writes (refused otherwise)")
 
 
 def build_config(a: argparse.Namespace):
@@ -64,7 +69,8 @@ def run(a: argparse.Namespace) -> int:
         print(cfg.dumps(), end="")
         return 0
     bar = Progress(0, label="vslam run", enabled=None if not a.quiet else False)
-    summary = run_sequence(a.sequence, a.out, cfg, camera=a.camera, max_frames=a.max_frames, progress=bar.update)
+    summary = run_sequence(a.sequence, a.out, cfg, camera=a.camera, max_frames=a.max_frames, progress=bar.update,
+                           overwrite=a.overwrite, skip_bad_frames=a.skip_bad_frames)
     bar.close()
     if a.json:   # one object, nothing else on stdout: `vslam run ... --json | jq .summary`
         doc = {"out": str(summary.out), **json.loads((summary.out / "metrics.json").read_text())}

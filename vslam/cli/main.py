@@ -17,7 +17,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import signal
 import sys
+import threading
+import warnings
 from types import ModuleType
 
 import vslam.cli as cli_package
@@ -50,14 +53,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that the same clean-up runs (no half-written recording or output)."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     args.command_line = list(sys.argv[1:] if argv is None else argv)   # how the run was asked for (bench docs)
+    # warnings (skipped frames, decoder complaints naming the file, evaluation problems) as one line each
+    previous_show = warnings.showwarning
+    warnings.showwarning = lambda message, category, *_a, **_k: print(
+        f"vslam {args.command}: warning: {message}", file=sys.stderr)
+    in_main = threading.current_thread() is threading.main_thread()   # signal handlers live in the main thread
+    previous = signal.signal(signal.SIGTERM, _terminate) if in_main else None
     try:
         return int(args.func(args) or 0)
     except BrokenPipeError:  # output piped into `head` and closed: not an error
         return 0
+    except Terminated:
+        print("vslam: terminated", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
         print("vslam: interrupted", file=sys.stderr)
         return 130
@@ -66,6 +86,10 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"vslam {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    finally:
+        warnings.showwarning = previous_show
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -3,14 +3,16 @@ trajectories), or a pipeline result in memory beside its sequence."""
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from odometry.shared.atomic_io import atomic_write_text
 from odometry.shared.camera import CameraModel
+from odometry.shared.errors import ToolkitError
 from odometry.shared.tum import read_tum, se2_to_tum, tum_to_se2, tum_to_se3_matrices
-from vslam.errors import VslamError
+from vslam.errors import SkippedInputWarning, VslamError
 from vslam.evaluation import plots
 from vslam.evaluation.loops import LoopTable, loop_precision_recall, read_loops_csv
 from vslam.evaluation.metrics import Alignment, DeltaUnit, align, associate, evaluate, start_to_end_error
@@ -19,6 +21,16 @@ from vslam.io import open_sequence
 from vslam.sequence import Trajectory
 
 TRAJECTORIES = {"VO": "trajectory_vo.txt", "SLAM": "trajectory_slam.txt"}
+# What makes an evaluation impossible without the run being wrong: too few frames, ground truth that barely moves
+# (a degenerate alignment), timestamps that do not associate. They become warnings recorded beside the results.
+EVALUATION_PROBLEMS = (ToolkitError, np.linalg.LinAlgError)
+
+
+def note_problem(problems: list[str], what: str, exc: BaseException) -> None:
+    """Record an evaluation problem (`what` failed because of `exc`) and warn about it."""
+    msg = f"{what}: {exc}"
+    problems.append(msg)
+    warnings.warn(SkippedInputWarning(f"evaluation skipped: {msg}"), stacklevel=3)
 
 
 def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignment: Alignment | str = Alignment.SE3,
@@ -45,20 +57,27 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
     report: dict = {"alignment": Alignment(alignment).value, "rpe_delta": delta, "rpe_delta_unit": DeltaUnit(delta_unit).value,
                     "trajectories": {}}
     series, planar = {}, {}
+    problems: list[str] = []
+    found = 0
     for name, fname in TRAJECTORIES.items():
         f = out / fname
         if not f.is_file():
             continue
+        found += 1
         t_est, est = read_tum(f)
-        rep = evaluate(t_gt, gt_m, t_est, tum_to_se3_matrices(est), alignment, max_diff, delta, delta_unit)
-        d = rep.to_dict()
-        ig, ie = associate(t_gt, t_est, max_diff)
-        d["start_to_end"] = start_to_end_error(tum_to_se2(est[ie]), tum_to_se2(gt[ig]))
+        try:
+            rep = evaluate(t_gt, gt_m, t_est, tum_to_se3_matrices(est), alignment, max_diff, delta, delta_unit)
+            d = rep.to_dict()
+            ig, ie = associate(t_gt, t_est, max_diff)
+            d["start_to_end"] = start_to_end_error(tum_to_se2(est[ie]), tum_to_se2(gt[ig]))
+            aligned, _ = align(gt_m[ig], tum_to_se3_matrices(est[ie]), alignment)
+        except EVALUATION_PROBLEMS as exc:
+            note_problem(problems, f"{fname}", exc)
+            continue
         report["trajectories"][name] = d
         series[name] = (rep.timestamps - t_gt[0], rep.ape_errors)
-        aligned, _ = align(gt_m[ig], tum_to_se3_matrices(est[ie]), alignment)
         planar[name] = np.column_stack([aligned[:, 0, 3], aligned[:, 1, 3]])
-    if not report["trajectories"]:
+    if not found:
         raise FileNotFoundError(f"{out}: no trajectory_vo.txt or trajectory_slam.txt to evaluate")
     loops = None
     if (out / "loops.csv").is_file():
@@ -73,8 +92,14 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
             queried = run_info.get("keyframes")
             kw = dict(queried=np.asarray(queried) if queried else None, r=overlap_threshold,
                       min_separation=int(run_info.get("loop_min_separation", 1)))
-            report["loops"] = {"accepted": loop_precision_recall(camera, gt_frames, loops, **kw),
-                               "kept_by_back_end": loop_precision_recall(camera, gt_frames, loops, use_inliers=True, **kw)}
+            try:
+                report["loops"] = {"accepted": loop_precision_recall(camera, gt_frames, loops, **kw),
+                                   "kept_by_back_end": loop_precision_recall(camera, gt_frames, loops,
+                                                                             use_inliers=True, **kw)}
+            except EVALUATION_PROBLEMS as exc:
+                note_problem(problems, "loops.csv", exc)
+    if problems:
+        report["problems"] = problems
     if make_plots:
         pdir = out / "plots"
         pdir.mkdir(exist_ok=True)
@@ -84,7 +109,8 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
             segs = _loop_segments(out, loops)
         plots.plot_trajectories(pdir / "trajectories.png", {"ground truth": gt_xy, **planar}, loop_positions=segs,
                                 title=f"aligned ({Alignment(alignment).value})")
-        plots.plot_errors(pdir / "error_over_time.png", series)
+        if series:
+            plots.plot_errors(pdir / "error_over_time.png", series)
         if loops is not None and len(loops):
             _loop_matrix(pdir / "loop_scores.png", loops, run_info.get("keyframes"))
     atomic_write_text(out / "eval.json", json.dumps(report, indent=2, default=float) + "\n")
@@ -94,18 +120,26 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
 def evaluate_result(result, seq) -> dict:
     """metrics.json's "evaluation" of a pipeline result against its sequence's ground truth: per trajectory ("vo",
     "slam") ATE/RPE after an SE(2) alignment and the start-to-end error; "loops": precision/recall of the accepted
-    loops and of those the back end kept (floor-footprint overlap ground truth)."""
+    loops and of those the back end kept (floor-footprint overlap ground truth). What cannot be evaluated (one or
+    two frames, ground truth that barely moves) is left out with a warning and named in "problems"."""
     gt = seq.groundtruth
     gtm = tum_to_se3_matrices(gt.poses)
-    out = {}
+    out: dict = {}
+    problems: list[str] = []
     gt_frames = seq.groundtruth_planar()[: len(result.timestamps)]
     for name, p in (("vo", result.poses_vo), ("slam", result.poses_slam)):
-        rep = evaluate(gt.timestamps, gtm, result.timestamps, tum_to_se3_matrices(se2_to_tum(p)), "se2")
-        d = rep.to_dict()
-        ok = ~np.isnan(gt_frames[:, 0])
-        d["start_to_end"] = start_to_end_error(p[ok], gt_frames[ok])
+        try:
+            rep = evaluate(gt.timestamps, gtm, result.timestamps, tum_to_se3_matrices(se2_to_tum(p)), "se2")
+            d = rep.to_dict()
+            ok = ~np.isnan(gt_frames[:, 0])
+            d["start_to_end"] = start_to_end_error(p[ok], gt_frames[ok])
+        except EVALUATION_PROBLEMS as exc:
+            note_problem(problems, f"{name} trajectory", exc)
+            continue
         out[name] = d
-    if result.loops:
+    if problems:
+        out["problems"] = problems
+    if result.loops and not problems:
         L = result.loops
         table = LoopTable(np.array([l.query_frame for l in L]), np.array([l.match_frame for l in L]),
                           np.array([l.global_score for l in L]), np.array([l.local_score for l in L]),
@@ -153,6 +187,7 @@ def format_report(rep: dict) -> str:
         lines.append(f"| {name} | {d['matched']} | {d['path_length_m']:.2f} | {d['ape_m']['rmse']:.4f} | "
                      f"{d['ape_rmse_percent_of_path']:.3f} | {d['rpe_m']['rmse']:.5f} | {d['rpe_rot_deg']['rmse']:.4f} | "
                      f"{se.get('error_distance', float('nan')):.4f} |")
+    lines += [f"not evaluated: {p}" for p in rep.get("problems", [])]
     if "loops" in rep:
         for k, v in rep["loops"].items():
             rec = v.get("recall", float("nan"))

@@ -8,18 +8,20 @@ import cv2
 import numpy as np
 
 from vslam.errors import VslamError
+from vslam.image_file import read_image_file
 from vslam.io.sequence_dir import read_sequence_dir
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 
 
-def list_images(folder: str | Path) -> list[tuple[str, Path]]:
-    """(name, path) of the images of an image folder, or of a sequence directory's frames.csv, in order."""
+def list_images(folder: str | Path, check_images: str = "exists") -> list[tuple[str, Path]]:
+    """(name, path) of the images of an image folder, or of a sequence directory's frames.csv, in order;
+    `check_images` as `read_sequence_dir` ("none": listed files may be missing)."""
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"{folder}: not a directory")
     if (folder / "frames.csv").is_file():
-        seq = read_sequence_dir(folder, require_camera=False)   # validated: header, timestamps, images exist
+        seq = read_sequence_dir(folder, check_images=check_images, require_camera=False)   # validated: header, timestamps, images exist
         out = [(rel, folder / rel) for rel in seq.images.relpaths]
     else:
         out = [(str(p.relative_to(folder)), p) for p in sorted(folder.rglob("*"))
@@ -30,10 +32,9 @@ def list_images(folder: str | Path) -> list[tuple[str, Path]]:
 
 
 def read_image(path: Path) -> np.ndarray:
-    """An image file as 8-bit grey or BGR (deeper images scaled to 0-255, alpha dropped); OSError names the file."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise OSError(f"{path}: cannot read image")
+    """An image file as 8-bit grey or BGR (deeper images scaled to 0-255, alpha dropped); ImageReadError names the
+    file (missing, truncated, corrupt)."""
+    img = read_image_file(path, cv2.IMREAD_UNCHANGED)
     if img.dtype != "uint8":
         img = cv2.convertScaleAbs(img, alpha=255.0 / max(float(img.max()), 1.0))
     if img.ndim == 3 and img.shape[2] == 4:

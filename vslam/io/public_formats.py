@@ -16,11 +16,13 @@ from odometry.shared.tum import se3_matrices_to_tum
 from vslam.errors import (
     CsvFormatError,
     EmptySequenceError,
+    ImageReadError,
     MissingFileError,
     SequenceError,
     TimestampOrderError,
     VslamError,
 )
+from vslam.image_file import read_image_file
 from vslam.io.sequence_dir import CAMERA_FILE, read_camera_yaml, read_groundtruth
 from vslam.sequence import FileImages, Sequence, Trajectory, VideoImages
 
@@ -98,8 +100,10 @@ def read_tum_rgbd(root: str | os.PathLike, camera: CameraModel | str | None = No
     if cam is None:
         m = re.search(r"freiburg([123])", root.name)
         if m:
-            img = cv2.imread(str(root / names[0]), cv2.IMREAD_UNCHANGED)
-            h, w = (480, 640) if img is None else img.shape[:2]
+            try:   # the image size of the camera; a bad first frame leaves the published 640 x 480
+                h, w = read_image_file(root / names[0], cv2.IMREAD_UNCHANGED).shape[:2]
+            except ImageReadError:
+                h, w = 480, 640
             cam = CameraModel(width=w, height=h, **TUM_RGBD_CAMERAS[f"freiburg{m.group(1)}"])
     gt = read_groundtruth(root / "groundtruth.txt") if (root / "groundtruth.txt").is_file() else None
     return Sequence(timestamps=t, images=FileImages(root, names), camera=cam, groundtruth=gt, root=root,
@@ -180,9 +184,7 @@ def read_kitti(root: str | os.PathLike, camera: CameraModel | str | None = None,
     cam = _camera_for(root, camera, None)
     if cam is None:
         P = _read_kitti_calib(root / "calib.txt")
-        img = cv2.imread(str(root / names[0]), cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise SequenceError(root / names[0], "image cannot be decoded")
+        img = read_image_file(root / names[0], cv2.IMREAD_UNCHANGED)   # ImageReadError names the file
         cam = CameraModel(width=img.shape[1], height=img.shape[0], fx=P[0, 0], fy=P[1, 1], cx=P[0, 2], cy=P[1, 2])
     gt = None
     pose_file = root / "poses.txt"

@@ -12,6 +12,7 @@ import math
 import os
 import shutil
 import tempfile
+import warnings
 from pathlib import Path
 
 import cv2
@@ -27,8 +28,10 @@ from vslam.errors import (
     ImageReadError,
     MissingFileError,
     SequenceError,
+    SkippedInputWarning,
     TimestampOrderError,
 )
+from vslam.image_file import read_image_file
 from vslam.io.csvstreams import format_csv, read_csv_columns
 from vslam.sequence import FileImages, GyroStream, Sequence, Trajectory, WheelOdometry
 
@@ -142,14 +145,22 @@ def read_sequence_dir(root: str | os.PathLike, check_images: str = "exists", req
     odo = imu = gt = None
     if (root / ODOMETRY_FILE).exists():
         c = read_csv_columns(root / ODOMETRY_FILE, ODOMETRY_HEADER)
-        odo = WheelOdometry(c["timestamp"], c["v"], c["omega"])
+        odo = WheelOdometry(c["timestamp"], c["v"], c["omega"]) if _has_rows(root / ODOMETRY_FILE, c) else None
     if (root / IMU_FILE).exists():
         c = read_csv_columns(root / IMU_FILE, IMU_HEADER)
-        imu = GyroStream(c["timestamp"], c["gyro_z"])
+        imu = GyroStream(c["timestamp"], c["gyro_z"]) if _has_rows(root / IMU_FILE, c) else None
     if (root / GROUNDTRUTH_FILE).exists():
         gt = read_groundtruth(root / GROUNDTRUTH_FILE)
     return Sequence(timestamps=frames["timestamp"], images=images, camera=camera, odometry=odo, imu=imu,
                     groundtruth=gt, root=root, name=root.name, format="sequence")
+
+
+def _has_rows(path: Path, columns: dict) -> bool:
+    """A stream file with a header and no samples is read as absent, with a warning naming it."""
+    if len(columns["timestamp"]):
+        return True
+    warnings.warn(SkippedInputWarning(f"{path}: no samples (header only): the stream is ignored"), stacklevel=3)
+    return False
 
 
 def read_groundtruth(path: Path) -> Trajectory:
@@ -159,7 +170,8 @@ def read_groundtruth(path: Path) -> Trajectory:
         raise SequenceError(path, str(exc).split(": ", 1)[-1]) from None
     bad = np.nonzero(np.diff(t) <= 0)[0]
     if len(bad):
-        raise TimestampOrderError(path, f"timestamp {t[bad[0] + 1]!r} does not increase (previous {t[bad[0]]!r})",
+        raise TimestampOrderError(path, f"timestamp {float(t[bad[0] + 1])!r} does not increase "
+                                        f"(previous {float(t[bad[0]])!r})",
                                   field="timestamp")
     return Trajectory(t, p)
 
@@ -173,8 +185,11 @@ def _check_images(listing: Path, images: FileImages, mode: str) -> None:
         p = images.path(i)
         if not p.is_file():
             raise ImageReadError(listing, f"image file {p} is missing", line=i + 2, field="image")
-        if mode == "decode" and cv2.imread(str(p), cv2.IMREAD_UNCHANGED) is None:
-            raise ImageReadError(listing, f"image file {p} cannot be decoded", line=i + 2, field="image")
+        if mode == "decode":
+            try:
+                read_image_file(p, cv2.IMREAD_UNCHANGED)
+            except ImageReadError as exc:
+                raise ImageReadError(listing, f"image file {p}: {exc.problem}", line=i + 2, field="image") from None
 
 
 # ---------------------------------------------------------------------------------------------------- writing

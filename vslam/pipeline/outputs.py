@@ -12,7 +12,7 @@ from odometry.shared.tum import write_tum
 from vslam.evaluation import plots
 from vslam.evaluation.loops import RUN_LOOPS_HEADER
 from vslam.evaluation.plots_loops import loop_status, plot_loop_matrix, similarity_matrix
-from vslam.evaluation.run_eval import evaluate_result
+from vslam.evaluation.run_eval import EVALUATION_PROBLEMS, evaluate_result, note_problem
 
 
 def _fmt(v) -> str:
@@ -33,9 +33,11 @@ def loops_csv_text(loops) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = True, plots: bool = True) -> Path:
+def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = True, plots: bool = True,
+                  bad_frames: list[dict] | None = None) -> Path:
     """All files of a run in `out_dir` (each written atomically). With a sequence that has ground truth, metrics.json
-    also holds ATE/RPE (SE(2) alignment), the start-to-end error and loop precision/recall."""
+    also holds ATE/RPE (SE(2) alignment), the start-to-end error and loop precision/recall. `bad_frames` (frames
+    that could not be read: index, file, problem) go into run.json and their count into metrics.json."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t = result.timestamps
@@ -47,19 +49,22 @@ def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = T
     run_info = {"sequence": str(Path(result.sequence).resolve()) if result.sequence else None,
                 "camera": result.camera.to_dict(), "keyframes": result.keyframes.tolist(),
                 "loop_min_separation": int(result.config.database_params().exclude_recent) + 1,
-                "config": result.config.to_dict()}
+                "config": result.config.to_dict(), "bad_frames": list(bad_frames or [])}
     atomic_write_text(out / "run.json", json.dumps(run_info, indent=1) + "\n")
-    metrics = {"summary": result.summary()}
+    metrics = {"summary": {**result.summary(), "bad_frames": len(bad_frames or [])}}
     if result.graph_result is not None:
         g = result.graph_result
         metrics["graph"] = {"nodes": int(len(g.node_ids)), "loops_kept": g.loops_kept, "loops_rejected": g.loops_rejected,
                             "initial_cost": g.initial_cost, "final_cost": g.final_cost, "iterations": g.iterations,
                             "seconds": g.seconds}
     if evaluate and sequence is not None and sequence.groundtruth is not None:
-        metrics["evaluation"] = evaluate_result(result, sequence)
-    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float) + "\n")
+        metrics["evaluation"] = evaluate_result(result, sequence)   # problems are warnings, listed in it
     if plots:
-        _plots(result, out, sequence)
+        try:
+            _plots(result, out, sequence)
+        except EVALUATION_PROBLEMS as exc:   # a plot must not cost the run's other files
+            note_problem(metrics.setdefault("problems", []), "plots", exc)
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, default=float) + "\n")
     return out
 
 
