@@ -148,8 +148,8 @@ def run_many(paths: Iterable[str | Path] | str | Path, config: PipelineConfig | 
 
 
 def _clean_state(out: Path, run_id: str) -> None:
-    """Remove this run's staging folders, attempt counters and trash (kept only while the run goes on)."""
+    """Remove this run's staging folders, attempt counters, saved outcomes and trash (needed only while it runs)."""
     state = state_dir(out)
-    for sub in ("work", "trash", "attempts"):
+    for sub in ("work", "trash", "attempts", "outcomes"):
         for p in (state / sub).glob(f"*.{run_id}*"):
             shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)

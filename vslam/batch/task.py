@@ -6,7 +6,10 @@ when it finished: a killed worker leaves no half-written outputs where finished 
 redo never removes the outputs of an earlier successful run. Each start appends a line to
 OUT/.batch/attempts/<name>.<run>, which counts starts the engine cannot see (a Dask scheduler reschedules the task
 of a lost worker by itself): past `max_attempts` starts the task gives up and reports the sequence as failed.
-OUT/.batch/running/<name>.json says which host and process runs a sequence while it runs.
+OUT/.batch/running/<name>.json says which host and process runs a sequence while it runs. A finished outcome is
+also kept in OUT/.batch/outcomes/<name>.<run>.json: a Dask result lives on its worker until the client fetches it,
+so a worker lost just after finishing makes the scheduler run the task again, and the task then hands back the
+saved outcome instead of redoing the sequence.
 
 A bad sequence (a `ToolkitError`, an `OSError`) or a bug (any other exception, with its traceback) becomes a
 "failed" outcome; only a dead process escapes, and the engine handles that.
@@ -66,6 +69,10 @@ def attempts_started(task: SequenceTask) -> int:
         return 0
 
 
+def _outcome_file(task: SequenceTask) -> Path:
+    return state_dir(task.out_root) / "outcomes" / f"{task.name}.{task.run_id}.json"
+
+
 def _begin_attempt(task: SequenceTask) -> int:
     d = state_dir(task.out_root) / "attempts"
     d.mkdir(parents=True, exist_ok=True)
@@ -100,6 +107,9 @@ def _metrics(summary) -> dict:
 def process_sequence(task: SequenceTask, progress: Callable[[int, int], None] | None = None) -> dict:
     """Run one sequence and return its outcome: name, status ("done" or "failed"), attempt, host, pid, started,
     finished, seconds, and the run's metrics (frames, frames/s, loops kept, ATE with ground truth) or its error."""
+    saved = _outcome_file(task)
+    if saved.is_file():
+        return json.loads(saved.read_text())
     base = {"name": task.name, "host": socket.gethostname(), "pid": os.getpid(), "started": now_iso()}
     attempt = _begin_attempt(task)
     base["attempt"] = attempt
@@ -117,8 +127,11 @@ def process_sequence(task: SequenceTask, progress: Callable[[int, int], None] | 
         summary = run_sequence(task.item.sequence, stage, task.config, camera=task.camera,
                                max_frames=task.max_frames, progress=progress)
         _publish(stage, Path(task.out_root) / task.name, state / "trash" / f"{task.name}.{task.run_id}.{attempt}")
-        return {**base, "status": "done", "finished": now_iso(), "seconds": time.perf_counter() - t0,
-                **_metrics(summary)}
+        outcome = {**base, "status": "done", "finished": now_iso(), "seconds": time.perf_counter() - t0,
+                   **_metrics(summary)}
+        saved.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(saved, json.dumps(outcome, default=float) + "\n")
+        return outcome
     except Exception as exc:   # one sequence's failure is reported, never raised into the engine
         out = {**base, "status": "failed", "finished": now_iso(), "seconds": time.perf_counter() - t0,
                "error": f"{type(exc).__name__}: {exc}"}
