@@ -3,6 +3,7 @@ local process pool or a Dask cluster, resumable through OUT/batch.json."""
 from __future__ import annotations
 
 import hashlib
+import json
 import shutil
 import time
 import uuid
@@ -153,3 +154,10 @@ def _clean_state(out: Path, run_id: str) -> None:
     for sub in ("work", "trash", "attempts", "outcomes"):
         for p in (state / sub).glob(f"*.{run_id}*"):
             shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
+    for marker in (state / "running").glob("*.json"):   # left behind by a process that was killed
+        try:
+            stale = json.loads(marker.read_text()).get("run_id") == run_id
+        except (OSError, ValueError):
+            stale = False
+        if stale:
+            marker.unlink(missing_ok=True)
