@@ -17,7 +17,7 @@ from vslam.batch.events import EngineEvents, lost_worker_outcome
 from vslam.batch.task import SequenceTask, process_sequence
 
 PROGRESS_INTERVAL = 0.25   # seconds between a child's progress messages: enough for a bar, little traffic
-PRELOAD = ["vslam.batch.task"]   # imports the pipeline, OpenCV, GTSAM and Rerun once, in the fork server
+PRELOAD = ["vslam.batch.warm"]   # the pipeline and what a run imports on first use, once, in the fork server
 
 
 def default_workers() -> int:
@@ -34,6 +34,20 @@ def _context() -> mp.context.BaseContext:
         ctx.set_forkserver_preload(PRELOAD)
         return ctx
     return mp.get_context("spawn")
+
+
+def _noop() -> None:
+    pass
+
+
+def start_server() -> float:
+    """Start the fork server (importing the toolkit into it) now rather than with the first sequence; seconds it
+    took, 0 when it was already up. It then serves every pool of this process."""
+    t0 = time.perf_counter()
+    proc = _context().Process(target=_noop)
+    proc.start()
+    proc.join()
+    return time.perf_counter() - t0
 
 
 def _child(task: SequenceTask, conn: Connection) -> None:
