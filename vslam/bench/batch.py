@@ -23,6 +23,7 @@ import statistics
 import time
 from pathlib import Path
 
+import vslam.batch.warm  # noqa: F401  (the sequential baseline starts as warm as the pool's processes)
 from vslam.app.run import run_sequence
 from vslam.batch import run_many
 from vslam.batch.pool import default_workers, start_server
