@@ -21,7 +21,7 @@ MANIFEST_FILE = "batch.json"
 VERSION = 1
 STATUSES = ("pending", "running", "done", "failed")
 # fields of a record that belong to one attempt: cleared when a sequence is (re)queued
-RESULT_FIELDS = ("started", "finished", "seconds", "frames", "keyframes", "pipeline_seconds", "frames_per_second",
+RESULT_FIELDS = ("started", "finished", "seconds", "cpu_seconds", "frames", "keyframes", "pipeline_seconds", "frames_per_second",
                  "loops_kept", "ate_slam_m", "ate_slam_percent", "ate_vo_m", "error", "traceback", "host", "pid",
                  "attempt")
 

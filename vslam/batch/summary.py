@@ -15,7 +15,7 @@ from odometry.shared.atomic_io import atomic_path, atomic_write_text
 from vslam.evaluation.plots import pyplot
 from vslam.evaluation.tables import format_table
 
-COLUMNS = ("name", "status", "reused", "attempts", "frames", "seconds", "frames_per_second", "ate_slam_m",
+COLUMNS = ("name", "status", "reused", "attempts", "frames", "seconds", "cpu_seconds", "frames_per_second", "ate_slam_m",
            "ate_slam_percent", "ate_vo_m", "loops_kept", "error", "sequence")
 
 

@@ -106,7 +106,7 @@ def _metrics(summary) -> dict:
 
 def process_sequence(task: SequenceTask, progress: Callable[[int, int], None] | None = None) -> dict:
     """Run one sequence and return its outcome: name, status ("done" or "failed"), attempt, host, pid, started,
-    finished, seconds, and the run's metrics (frames, frames/s, loops kept, ATE with ground truth) or its error."""
+    finished, seconds, cpu_seconds, and the run's metrics (frames, frames/s, loops kept, ATE with ground truth) or its error."""
     saved = _outcome_file(task)
     if saved.is_file():
         return json.loads(saved.read_text())
@@ -122,13 +122,14 @@ def process_sequence(task: SequenceTask, progress: Callable[[int, int], None] | 
     atomic_write_text(running, json.dumps({**base, "run_id": task.run_id}) + "\n")
     stage = state / "work" / f"{task.name}.{task.run_id}.{attempt}"
     shutil.rmtree(stage, ignore_errors=True)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         summary = run_sequence(task.item.sequence, stage, task.config, camera=task.camera,
                                max_frames=task.max_frames, progress=progress)
         _publish(stage, Path(task.out_root) / task.name, state / "trash" / f"{task.name}.{task.run_id}.{attempt}")
+        # CPU seconds of the whole process (all its threads): the cost of a sequence whatever else loads the machine
         outcome = {**base, "status": "done", "finished": now_iso(), "seconds": time.perf_counter() - t0,
-                   **_metrics(summary)}
+                   "cpu_seconds": time.process_time() - c0, **_metrics(summary)}
         saved.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(saved, json.dumps(outcome, default=float) + "\n")
         return outcome

@@ -17,6 +17,7 @@ import argparse
 import hashlib
 import importlib
 import json
+import logging
 import os
 import shutil
 import statistics
@@ -67,12 +68,13 @@ def _load() -> float:
 def _sequential(paths: list[Path], out: Path, cfg: PipelineConfig) -> dict:
     shutil.rmtree(out, ignore_errors=True)
     load0, t0 = _load(), time.perf_counter()
-    task_s = []
+    task_s, cpu_s = [], []
     for p in paths:
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), time.process_time()
         run_sequence(str(p.resolve()), out / p.name, cfg)
         task_s.append(time.perf_counter() - t1)
-    return {"wall": time.perf_counter() - t0, "task_seconds": task_s, "load": [load0, _load()]}
+        cpu_s.append(time.process_time() - c1)
+    return {"wall": time.perf_counter() - t0, "task_seconds": task_s, "cpu_seconds": cpu_s, "load": [load0, _load()]}
 
 
 def _batch(paths: list[Path], out: Path, cfg: PipelineConfig, workers: int, client=None) -> dict:
@@ -82,8 +84,8 @@ def _batch(paths: list[Path], out: Path, cfg: PipelineConfig, workers: int, clie
     wall = time.perf_counter() - t0
     if not summary.ok:
         raise RuntimeError(f"batch into {out} failed: {[r['error'] for r in summary.failed]}")
-    task_s = [r["seconds"] for r in summary.rows]
-    return {"wall": wall, "task_seconds": task_s, "load": [load0, _load()]}
+    return {"wall": wall, "task_seconds": [r["seconds"] for r in summary.rows],
+            "cpu_seconds": [r["cpu_seconds"] for r in summary.rows], "load": [load0, _load()]}
 
 
 def _same_outputs(a: Path, b: Path, names: list[str]) -> bool:
@@ -111,9 +113,12 @@ def _row(label: str, runs: list[dict], base: float, n: int, workers: int) -> lis
     wall = median([r["wall"] for r in runs])
     over = median([_overhead(r, n, workers) for r in runs])
     task = median([statistics.fmean(r["task_seconds"]) for r in runs])
+    cpu = median([statistics.fmean(r["cpu_seconds"]) for r in runs])
     load = f"{min(r['load'][0] for r in runs):.1f}-{max(max(r['load']) for r in runs):.1f}"
+    # CPU share: CPU-seconds the engine got per wall second, out of `workers` (what other jobs left to us)
+    share = median([sum(r["cpu_seconds"]) / r["wall"] for r in runs])
     return [label, workers, f"{wall:.1f}", f"{n / wall * 3600:.0f}", f"{base / wall:.2f}", f"{task:.2f}",
-            f"{over:+.2f}", load]
+            f"{cpu:.2f}", f"{over:+.2f}", f"{share:.2f}", load]
 
 
 def run(args: argparse.Namespace) -> BenchResult:
@@ -144,6 +149,8 @@ def run(args: argparse.Namespace) -> BenchResult:
                 res["dask"].append(_batch(paths, out / "dask", cfg, workers, client))
     finally:
         if client is not None:
+            # workers shutting down log their closed heartbeats as errors: not news at the end of a benchmark
+            logging.getLogger("distributed").setLevel(logging.CRITICAL)
             client.close()
             cluster.close()
     names = [p.name for p in paths]
@@ -155,7 +162,7 @@ def run(args: argparse.Namespace) -> BenchResult:
     if res["dask"]:
         rows.append(_row("local Dask cluster", res["dask"], base, n, workers))
     table = format_table(["engine", "workers", "wall (s)", "sequences/hour", "speedup", "task (s/seq)",
-                          "overhead (s/seq)", "load avg"], rows)
+                          "CPU (s/seq)", "overhead (s/seq)", "CPUs used", "load avg"], rows)
     title = (f"{n} simulated sequences of {args.frames} frames at {args.size}, full pipeline with recording, on "
              f"{os.cpu_count()} CPUs; median of {args.repeats} runs per engine")
     notes = [f"outputs identical across engines (trajectories, loops, graph, run.json): {'yes' if same else 'NO'}"]
@@ -168,7 +175,9 @@ def run(args: argparse.Namespace) -> BenchResult:
                                          f"; Dask cluster of {workers} workers with the toolkit imported "
                                          f"{cluster_start:.1f} s (a real cluster is already up)"))
     notes.append("overhead = wall x workers / sequences - mean task time: worker time a sequence holds beyond its "
-                 "own run (process start, scheduling, waiting for the last sequence, contention for the CPUs)")
+                 "own run (process start, scheduling, waiting for the last sequence); CPU = CPU seconds of the "
+                 "process per sequence, all threads; CPUs used = CPU seconds of the tasks per wall second: a speedup "
+                 "needs the CPUs that other jobs on the machine leave free")
     print(f"\n{title}\n{table}\n\n" + "\n".join(notes))
     write_json(out / "bench_batch.json", {"sequences": n, "frames": args.frames, "size": args.size,
                                           "workers": workers, "runs": res, "cluster_start_seconds": cluster_start,
