@@ -34,16 +34,23 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _stop(procs: list[subprocess.Popen]) -> None:
+def _stop(procs: list[subprocess.Popen], grace: float = 5.0) -> None:
+    """SIGTERM every process, then SIGKILL the process groups still there after `grace` seconds in all."""
     for p in procs:
         if p.poll() is None:
             p.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + grace
     for p in procs:
         try:
-            p.wait(timeout=15)
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
-            os.killpg(p.pid, signal.SIGKILL)
-            p.wait(timeout=5)
+            pass
+    for p in procs:
+        try:
+            os.killpg(p.pid, signal.SIGKILL)   # the nannies' worker processes too
+        except ProcessLookupError:
+            pass
+        p.wait(timeout=10)
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +90,7 @@ def _simulate(path: Path, frames: int, seed: int) -> Path:
 def fleet(tmp_path_factory):
     """Four sequences (one long enough to be killed mid-run) and an invalid one, in one folder."""
     root = tmp_path_factory.mktemp("fleet")
-    for i, frames in enumerate((40, 40, 40, 160)):
+    for i, frames in enumerate((40, 40, 40, 120)):
         _simulate(root / f"seq{i}", frames, seed=i)
     bad = root / "seq9-bad"
     bad.mkdir()
