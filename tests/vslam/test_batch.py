@@ -93,6 +93,12 @@ def test_inputs_that_name_nothing(tmp_path):
         resolve_inputs([str(tmp_path / "empty")])
 
 
+def test_a_missing_scheduler_file_is_a_typed_error(fleet, tmp_path):
+    pytest.importorskip("distributed", reason="dask[distributed] is the optional extra vslam[cluster]")
+    with pytest.raises(BatchError, match="no such scheduler file"):
+        run_many([fleet / "s0"], QUICK, str(tmp_path / "sched.json"), out=tmp_path / "out")
+
+
 # ------------------------------------------------------------------------------------------------------ hashing
 def test_input_hash_follows_content_not_timestamps(fleet, tmp_path):
     a = tmp_path / "a"

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from distributed import Client, as_completed
 
+from vslam.batch.errors import BatchError
 from vslam.batch.events import EngineEvents, lost_worker_outcome
 from vslam.batch.task import SequenceTask, attempts_started, process_sequence
 
@@ -26,6 +27,8 @@ def connect(scheduler: str) -> Client:
         return Client(scheduler, timeout="30s")
     if Path(scheduler).is_file():
         return Client(scheduler_file=scheduler, timeout="30s")
+    if "/" in scheduler or scheduler.endswith((".json", ".yaml")):
+        raise BatchError(scheduler, "no such scheduler file (or give the address as tcp://HOST:PORT)")
     # HOST:PORT without a protocol
     return Client(f"tcp://{scheduler}", timeout="30s")
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from odometry.shared.errors import ToolkitError
+from vslam.batch.errors import BatchError
 from vslam.batch.hashing import config_hash, input_hash, stat_fingerprint
 from vslam.batch.inputs import BatchItem, resolve_inputs
 from vslam.batch.manifest import Manifest
@@ -72,9 +73,11 @@ def _combined_hash(item: BatchItem, in_hash: str, cfg_hash: str) -> str:
 def _engine(client, workers: int | None):
     if client is None:
         return LocalPool(workers)
-    # on use: dask[distributed] is an optional extra (vslam[cluster]); the local pool needs nothing from it
-    from vslam.batch.cluster import DaskCluster
-
+    try:   # on use: dask[distributed] is an optional extra (vslam[cluster]); the local pool needs nothing from it
+        from vslam.batch.cluster import DaskCluster
+    except ImportError as exc:
+        raise BatchError(None, f"a Dask scheduler needs dask[distributed] ({exc}): pip install 'vslam[cluster]'") \
+            from None
     return DaskCluster(client)
 
 
