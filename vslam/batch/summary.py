@@ -97,7 +97,9 @@ def plot_summary(path: Path, rows: list[dict]) -> None:
     axes[1].set_ylabel("frames/s")
     axes[2].bar(x, np.nan_to_num(_values(rows, "loops_kept")), 0.6, color="tab:purple")
     axes[2].set_ylabel("loops kept")
+    axes[2].yaxis.get_major_locator().set_params(integer=True)
     for ax in axes:
+        ax.set_ylim(bottom=0)
         for i in failed:
             ax.axvspan(i - 0.45, i + 0.45, color="tab:red", alpha=0.25, lw=0)
         ax.grid(axis="y", alpha=0.3)
@@ -105,8 +107,9 @@ def plot_summary(path: Path, rows: list[dict]) -> None:
         axes[2].plot(i, 0, "x", color="tab:red", ms=10, mew=2)
     axes[2].set_xticks(x, [r["name"] for r in rows], rotation=60, ha="right", fontsize=8)
     done = n - len(failed)
+    no_truth = any(r["status"] == "done" and r.get("ate_slam_m") is None for r in rows)
     axes[0].set_title(f"{n} sequences: {done} done, {len(failed)} failed (red)"
-                      + ("; ATE only where ground truth exists" if np.isnan(ate_slam).any() else ""))
+                      + ("\nATE only where ground truth exists" if no_truth else ""), fontsize=10)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
