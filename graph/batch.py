@@ -32,7 +32,7 @@ from graph.factors import (
     values_from_array,
 )
 from graph.gnc import gnc_optimize
-from graph.initial import chordal_guess, lago_guess, spanning_tree_guess
+from graph.initial import InitialGuessError, chordal_guess, lago_guess, spanning_tree_guess
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GncImpl, GncLoss, GraphParams, InitMethod, RobustMode
 from graph.result import GraphResult
@@ -179,11 +179,15 @@ def solve(data: PoseGraphData, params: GraphParams, candidates: np.ndarray | Non
         raise ValueError(f"{len(cand)} candidate flags for {L} loops")
     method = resolve_init(data, params)
     t0 = time.perf_counter()
-    guess = initial_guess(data, built, method)
+    notes: list[str] = []
+    try:
+        guess = initial_guess(data, built, method)
+    except InitialGuessError as exc:      # LAGO / chordal cannot run on this graph: the odometry tree always can
+        guess = initial_guess(data, built, InitMethod.ODOMETRY)
+        notes.append(f"{exc}; started from the odometry tree instead")
     init_seconds = time.perf_counter() - t0
     init_values = values_from_array(data.dim, guess)
     c2 = loop_thresholds(data.probability[built.loop_idx], TANGENT_DIM[data.dim], params)
-    notes: list[str] = []
     gnc_iters = 0
     sub = built.subset(cand)
     inlier = np.zeros(L, bool)

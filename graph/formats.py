@@ -6,12 +6,18 @@ g2o records
     VERTEX_SE3:QUAT id x y z qx qy qz qw
     EDGE_SE3:QUAT i j dx dy dz qx qy qz qw  I11 .. I16 I22 .. I66       (21 values, order x y z rx ry rz)
     FIX id [id ...]                                                      (vertices held fixed: the anchor)
+    PARAMS_* / other VERTEX_* / EDGE_* (PARAMS_SE3OFFSET, VERTEX_TRACKXYZ, EDGE_SE3_PRIOR, VERTEX_XY, ...: what g2o
+    and RTAB-Map write besides poses) are not optimised: kept verbatim for g2o output, one `GraphFormatWarning`
+    counts them per type. A UTF-8 byte-order mark is ignored.
 TORO records
     VERTEX2 id x y theta
     EDGE2 i j dx dy dtheta  Ixx Ixy Iyy Itt Ixt Iyt                      (TORO's own order, NOT g2o's)
     VERTEX3 id x y z roll pitch yaw
     EDGE3 i j dx dy dz roll pitch yaw  I11 .. I16 I22 .. I66             (upper triangle over x y z roll pitch yaw)
     EQUIV i j                                                            (kept verbatim, ignored by the solver)
+Vertex ids are integers of any size, kept exact (never through float64; see graph.ids); ids, order, information
+and comments survive a read -> write. An id that appears only on edges gets a node without a guess (placed from its
+neighbours; a `GraphFormatWarning` names the first such line when the file has VERTEX lines at all).
 Lines starting with '#' are comments; they are kept and written back in place. Any other record type, a wrong
 field count, a non-numeric or non-finite value, a duplicate vertex, a zero quaternion or an information matrix
 that is not symmetric positive definite raises `GraphFormatError` naming file:line.
@@ -24,11 +30,13 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from graph.errors import GraphError
+from graph.ids import common_ids, id_array
 from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, classify_edges
 from odometry.shared.atomic_io import atomic_write_text
 from odometry.shared.rotations import quat_to_rotmat
@@ -43,6 +51,13 @@ class GraphFormatError(GraphError):
         self.problem = problem
         super().__init__(f"{self.path}{'' if line is None else f':{line}'}: {problem}")
 
+
+class GraphFormatWarning(UserWarning):
+    """A pose-graph file read with records skipped or vertices implied: the message names the file and counts."""
+
+
+# g2o record families read past (not optimised): parameter blocks, and vertex / edge types other than the poses
+_OTHER_G2O_PREFIXES = ("PARAMS_", "VERTEX_", "EDGE_")
 
 # tag -> (format, dim, kind, number of numeric fields after the tag)
 _TAGS = {
@@ -92,10 +107,15 @@ def quat_to_rpy(q: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------------------ read
+def _is_other_g2o(tag: str) -> bool:
+    """A g2o record we read past: parameter blocks, and vertex / edge types that are not SE2 / SE3:QUAT poses."""
+    return tag.startswith(_OTHER_G2O_PREFIXES) and tag not in _TAGS
+
+
 def sniff_format(path: str | os.PathLike) -> str:
     """'g2o' or 'toro', from the first record tag in the file."""
     path = Path(path)
-    with open(path, encoding="utf-8", errors="replace") as f:
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
         for lineno, line in enumerate(f, 1):
             s = line.strip()
             if not s or s.startswith("#"):
@@ -103,13 +123,18 @@ def sniff_format(path: str | os.PathLike) -> str:
             tag = s.split()[0]
             if tag in _TAGS:
                 return _TAGS[tag][0]
-            if tag in ("FIX",):
+            if tag == "FIX" or _is_other_g2o(tag):
                 return "g2o"
             if tag == "EQUIV":
                 return "toro"
-            raise GraphFormatError(path, lineno, f"unknown record type {tag!r}; expected one of "
-                                                 f"{', '.join(sorted(_TAGS))}, FIX or EQUIV")
+            raise GraphFormatError(path, lineno, f"unknown record type {_shown(tag)}; expected one of "
+                                                 f"{', '.join(sorted(_TAGS))}, FIX, EQUIV or another g2o "
+                                                 "VERTEX_* / EDGE_* / PARAMS_* record")
     raise GraphFormatError(path, None, "no vertex or edge records (empty pose-graph file)")
+
+
+def _shown(tag: str) -> str:
+    return repr(tag if len(tag) <= 40 else tag[:40] + "...")
 
 
 def read_graph(path: str | os.PathLike, toro_info_order: str = "auto") -> PoseGraphData:
@@ -119,7 +144,8 @@ def read_graph(path: str | os.PathLike, toro_info_order: str = "auto") -> PoseGr
 
 
 def read_g2o(path: str | os.PathLike) -> PoseGraphData:
-    """Read a g2o file: VERTEX_SE2 / EDGE_SE2 or VERTEX_SE3:QUAT / EDGE_SE3:QUAT, FIX, comments."""
+    """Read a g2o file: VERTEX_SE2 / EDGE_SE2 or VERTEX_SE3:QUAT / EDGE_SE3:QUAT, FIX, comments; other VERTEX_* /
+    EDGE_* / PARAMS_* records are kept verbatim but not optimised (one `GraphFormatWarning` counts them)."""
     return _read(Path(path), "g2o")
 
 
@@ -134,12 +160,24 @@ def read_toro(path: str | os.PathLike, info_order: str = "auto") -> PoseGraphDat
     return _read(Path(path), "toro", info_order)
 
 
+def _parse_ids(path: Path, lineno: int, tag: str, fields: list[str]) -> list[int]:
+    # ids stay Python ints from here on (graph.ids): never float64, never a wrapping cast
+    try:
+        return [int(p) for p in fields]
+    except ValueError:
+        raise GraphFormatError(path, lineno, f"{tag}: vertex ids must be integers, got "
+                                             f"{_shown(' '.join(fields))}") from None
+
+
 def _read(path: Path, fmt: str, info_order: str = "toro") -> PoseGraphData:
     dim = None
     v_ids, v_vals, v_lines = [], [], []
-    e_vals, e_lines = [], []
-    fixed, comments, extras, layout = [], [], [], []
-    with open(path, encoding="utf-8", errors="replace") as f:
+    e_ids, e_vals, e_lines = [], [], []
+    fixed, fix_lines, comments, extras, layout = [], [], [], [], []
+    other: dict[str, list[int]] = {}          # skipped g2o record type -> its line numbers
+    other_vertices: dict[int, str] = {}       # id -> type of a skipped (non-pose) vertex
+    # utf-8-sig: a UTF-8 byte-order mark (Windows editors, some exporters) is not part of the first tag
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
         for lineno, line in enumerate(f, 1):
             s = line.strip()
             if not s:
@@ -151,25 +189,36 @@ def _read(path: Path, fmt: str, info_order: str = "toro") -> PoseGraphData:
             parts = s.split("#", 1)[0].split()
             tag = parts[0]
             if tag == "FIX" and fmt == "g2o":
-                try:
-                    ids = [int(p) for p in parts[1:]]
-                except ValueError:
-                    raise GraphFormatError(path, lineno, f"FIX: vertex ids must be integers, got {s!r}") from None
+                ids = _parse_ids(path, lineno, "FIX", parts[1:])
                 if not ids:
                     raise GraphFormatError(path, lineno, "FIX without a vertex id")
                 layout.append(("X", len(extras)))
                 extras.append(s)
                 fixed.extend(ids)
+                fix_lines.extend([lineno] * len(ids))
                 continue
             if tag == "EQUIV" and fmt == "toro":
                 layout.append(("X", len(extras)))
                 extras.append(s)
                 continue
+            if fmt == "g2o" and _is_other_g2o(tag):
+                # g2o and RTAB-Map write parameter blocks (PARAMS_SE3OFFSET), landmarks (VERTEX_TRACKXYZ, VERTEX_XY)
+                # and their edges: not poses, so not optimised; kept verbatim so the output keeps them
+                other.setdefault(tag, []).append(lineno)
+                if tag.startswith("VERTEX_") and len(parts) > 1:
+                    try:
+                        other_vertices.setdefault(int(parts[1]), tag)
+                    except ValueError:
+                        pass
+                layout.append(("X", len(extras)))
+                extras.append(s)
+                continue
             spec = _TAGS.get(tag)
             if spec is None or spec[0] != fmt:
-                allowed = sorted(t for t, v in _TAGS.items() if v[0] == fmt) + (["FIX"] if fmt == "g2o" else ["EQUIV"])
-                raise GraphFormatError(path, lineno, f"unknown record type {tag!r} in a {fmt} file; expected one of "
-                                                     f"{', '.join(allowed)}")
+                allowed = sorted(t for t, v in _TAGS.items() if v[0] == fmt) + (
+                    ["FIX", "other VERTEX_* / EDGE_* / PARAMS_*"] if fmt == "g2o" else ["EQUIV"])
+                raise GraphFormatError(path, lineno, f"unknown record type {_shown(tag)} in a {fmt} file; expected "
+                                                     f"one of {', '.join(allowed)}")
             _, tdim, kind, nfields = spec
             if dim is None:
                 dim = tdim
@@ -178,16 +227,12 @@ def _read(path: Path, fmt: str, info_order: str = "toro") -> PoseGraphData:
             if len(parts) - 1 != nfields:
                 raise GraphFormatError(path, lineno, f"{tag} needs {nfields} fields after the tag, got {len(parts) - 1}")
             nid = 1 if kind == "V" else 2
-            try:
-                ids = [int(p) for p in parts[1:1 + nid]]
-            except ValueError:
-                raise GraphFormatError(path, lineno, f"{tag}: vertex ids must be integers, got "
-                                                     f"{' '.join(parts[1:1 + nid])!r}") from None
+            ids = _parse_ids(path, lineno, tag, parts[1:1 + nid])
             try:
                 vals = [float(p) for p in parts[1 + nid:]]
             except ValueError:
                 bad = next(p for p in parts[1 + nid:] if not _is_float(p))
-                raise GraphFormatError(path, lineno, f"{tag}: non-numeric value {bad!r}") from None
+                raise GraphFormatError(path, lineno, f"{tag}: non-numeric value {_shown(bad)}") from None
             if not all(math.isfinite(v) for v in vals):
                 raise GraphFormatError(path, lineno, f"{tag}: NaN or infinite value")
             if kind == "V":
@@ -197,12 +242,18 @@ def _read(path: Path, fmt: str, info_order: str = "toro") -> PoseGraphData:
                 v_lines.append(lineno)
             else:
                 layout.append(("E", len(e_vals)))
-                e_vals.append(ids + vals)
+                e_ids.append(ids)
+                e_vals.append(vals)
                 e_lines.append(lineno)
     if dim is None:
-        raise GraphFormatError(path, None, "no vertex or edge records (empty pose-graph file)")
-    return _assemble(path, fmt, dim, info_order, v_ids, v_vals, v_lines, e_vals, e_lines, fixed, comments, extras,
-                     layout)
+        what = f" (only {', '.join(sorted(other))} records, which are not poses)" if other else ""
+        raise GraphFormatError(path, None, f"no pose vertex or edge records{what} (empty pose-graph file)")
+    if other:
+        counts = ", ".join(f"{len(v)} {t}" for t, v in sorted(other.items()))
+        warnings.warn(GraphFormatWarning(f"{path}: skipped records that are not pose vertices or pose edges "
+                                         f"(kept in g2o output, not optimised): {counts}"), stacklevel=3)
+    return _assemble(path, fmt, dim, info_order, v_ids, v_vals, v_lines, e_ids, e_vals, e_lines, fixed, fix_lines,
+                     comments, extras, layout, other_vertices)
 
 
 def _is_float(s: str) -> bool:
@@ -213,13 +264,47 @@ def _is_float(s: str) -> bool:
         return False
 
 
-def _assemble(path, fmt, dim, info_order, v_ids, v_vals, v_lines, e_vals, e_lines, fixed, comments, extras, layout):
+def _check_ids(path, v_ids, v_lines, e_ids, e_lines, fixed, fix_lines, other_vertices) -> tuple[list[int], list[int]]:
+    """Duplicates, self-edges, edges to non-pose vertices, FIX on unknown ids. Returns (node ids in order: vertex
+    lines first, then ids seen only on edges, ascending; the FIX ids that name pose nodes, sorted)."""
+    seen: dict[int, int] = {}
+    for k, i in enumerate(v_ids):
+        if i in seen:
+            raise GraphFormatError(path, v_lines[k], f"duplicate vertex id {i} (first defined on line "
+                                                     f"{v_lines[seen[i]]})")
+        if i in other_vertices:
+            raise GraphFormatError(path, v_lines[k], f"vertex id {i} is also a {other_vertices[i]} vertex")
+        seen[i] = k
+    edge_only: dict[int, int] = {}
+    for (i, j), ln in zip(e_ids, e_lines):
+        if i == j:
+            raise GraphFormatError(path, ln, f"edge from vertex {i} to itself")
+        for n in (i, j):
+            if n in other_vertices:
+                raise GraphFormatError(path, ln, f"pose edge names vertex {n}, which is a {other_vertices[n]} "
+                                                 "vertex, not a pose")
+            if n not in seen and n not in edge_only:
+                edge_only[n] = ln
+    if v_ids and edge_only:
+        first = min(edge_only, key=edge_only.get)
+        warnings.warn(GraphFormatWarning(
+            f"{path}:{edge_only[first]}: {len(edge_only)} vertex id(s) appear only on edges, with no VERTEX line "
+            f"(first: {first}); they are placed by composing edges from their neighbours"), stacklevel=4)
+    node_ids = list(v_ids) + sorted(edge_only)
+    known = set(node_ids)
+    fixed_ids = []
+    for i, ln in zip(fixed, fix_lines):
+        if i in known:
+            fixed_ids.append(i)
+        elif i not in other_vertices:     # FIX on a landmark (not optimised here) is harmless
+            raise GraphFormatError(path, ln, f"FIX names vertex {i}, which no record defines")
+    return node_ids, sorted(set(fixed_ids))
+
+
+def _assemble(path, fmt, dim, info_order, v_ids, v_vals, v_lines, e_ids, e_vals, e_lines, fixed, fix_lines, comments,
+              extras, layout, other_vertices):
     w = POSE_WIDTH[dim]
-    v_ids = np.asarray(v_ids, np.int64)
-    uniq, first = np.unique(v_ids, return_index=True)
-    if len(uniq) != len(v_ids):
-        dup_pos = np.setdiff1d(np.arange(len(v_ids)), first)[0]
-        raise GraphFormatError(path, v_lines[dup_pos], f"duplicate vertex id {int(v_ids[dup_pos])}")
+    node_list, fixed_list = _check_ids(path, v_ids, v_lines, e_ids, e_lines, fixed, fix_lines, other_vertices)
     vv = np.asarray(v_vals, float).reshape(len(v_ids), 3 if dim == 2 else (6 if fmt == "toro" else 7))
     if dim == 2:
         poses = vv.reshape(-1, 3)
@@ -227,13 +312,11 @@ def _assemble(path, fmt, dim, info_order, v_ids, v_vals, v_lines, e_vals, e_line
         poses = np.column_stack([vv[:, :3], rpy_to_quat(vv[:, 3:6])]) if len(vv) else np.zeros((0, 7))
     else:
         poses = _normalised_quats(path, vv.reshape(-1, 7), v_lines, "vertex")
-    ev = np.asarray(e_vals, float).reshape(len(e_vals), 11 if dim == 2 else (29 if fmt == "toro" else 30))
+    ev = np.asarray(e_vals, float).reshape(len(e_vals), 9 if dim == 2 else (27 if fmt == "toro" else 28))
     e_lines = np.asarray(e_lines)
-    ei = ev[:, 0].astype(np.int64) if len(ev) else np.zeros(0, np.int64)
-    ej = ev[:, 1].astype(np.int64) if len(ev) else np.zeros(0, np.int64)
     if dim == 2:
-        meas = ev[:, 2:5] if len(ev) else np.zeros((0, 3))
-        raw = ev[:, 5:11] if len(ev) else np.zeros((0, 6))
+        meas = ev[:, 0:3]
+        raw = ev[:, 3:9]
         if fmt == "g2o":
             info = raw[:, _G2O_INFO_2D]
         else:
@@ -242,40 +325,19 @@ def _assemble(path, fmt, dim, info_order, v_ids, v_vals, v_lines, e_vals, e_line
                 info = raw[:, _G2O_INFO_2D]
     else:
         if fmt == "g2o":
-            meas = _normalised_quats(path, ev[:, 2:9], e_lines, "edge") if len(ev) else np.zeros((0, 7))
-            info = _sym_from_upper(ev[:, 9:30], 6) if len(ev) else np.zeros((0, 6, 6))
+            meas = _normalised_quats(path, ev[:, 0:7], e_lines, "edge") if len(ev) else np.zeros((0, 7))
+            info = _sym_from_upper(ev[:, 7:28], 6) if len(ev) else np.zeros((0, 6, 6))
         else:
-            meas = np.column_stack([ev[:, 2:5], rpy_to_quat(ev[:, 5:8])]) if len(ev) else np.zeros((0, 7))
-            info = _sym_from_upper(ev[:, 8:29], 6) if len(ev) else np.zeros((0, 6, 6))
+            meas = np.column_stack([ev[:, 0:3], rpy_to_quat(ev[:, 3:6])]) if len(ev) else np.zeros((0, 7))
+            info = _sym_from_upper(ev[:, 6:27], 6) if len(ev) else np.zeros((0, 6, 6))
     _check_information(path, info, e_lines)
-    # node order: vertex lines first, then ids seen only on edges (ascending)
-    extra_ids = np.setdiff1d(np.concatenate([ei, ej]), v_ids)
-    node_ids = np.concatenate([v_ids, extra_ids])
-    all_poses = np.vstack([poses.reshape(-1, w), np.full((len(extra_ids), w), np.nan)])
-    fixed_ids = np.unique(np.asarray(fixed, np.int64))
-    unknown_fix = np.setdiff1d(fixed_ids, node_ids)
-    if len(unknown_fix):
-        k = next(n for n, x in enumerate(extras) if x.split()[0] == "FIX" and str(int(unknown_fix[0])) in x.split()[1:])
-        fix_line = _line_of(path, layout, ("X", k))
-        raise GraphFormatError(path, fix_line, f"FIX names vertex {int(unknown_fix[0])}, which no record defines")
-    self_loops = np.flatnonzero(ei == ej)
-    if len(self_loops):
-        raise GraphFormatError(path, int(e_lines[self_loops[0]]), f"edge from vertex {int(ei[self_loops[0]])} to itself")
+    node_ids = id_array(node_list)
+    all_poses = np.vstack([poses.reshape(-1, w), np.full((len(node_list) - len(v_ids), w), np.nan)])
+    ei = id_array([e[0] for e in e_ids])
+    ej = id_array([e[1] for e in e_ids])
+    node_ids, ei, ej = common_ids(node_ids, ei, ej)
     return PoseGraphData(dim, node_ids, all_poses, ei, ej, meas, info, classify_edges(node_ids, ei, ej),
-                         np.ones(len(ei)), fixed_ids, comments, extras, layout)
-
-
-def _line_of(path: Path, layout, rec) -> int | None:
-    # only used on the error path: re-read the file to find the record's line
-    k = layout.index(rec)
-    n = -1
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for lineno, line in enumerate(f, 1):
-            if line.strip():
-                n += 1
-                if n == k:
-                    return lineno
-    return None
+                         np.ones(len(ei)), id_array(fixed_list), comments, extras, layout)
 
 
 def _normalised_quats(path, arr, lines, what) -> np.ndarray:
@@ -376,9 +438,8 @@ def _format(data: PoseGraphData, fmt: str, poses: np.ndarray | None) -> str:
         raise ValueError(f"{len(poses)} poses for {data.num_nodes} nodes")
     vlines = _vertex_lines(data, fmt, poses)
     elines = _edge_lines(data, fmt)
-    # verbatim extra lines are format-specific: FIX exists only in g2o, EQUIV only in TORO
-    keep_tag = "FIX" if fmt == "g2o" else "EQUIV"
-    xlines = [x if x.split()[0] == keep_tag else None for x in data.extras]
+    # verbatim extra lines are format-specific: FIX and the skipped g2o records exist only in g2o, EQUIV only in TORO
+    xlines = [x if (x.split()[0] == "EQUIV") == (fmt == "toro") else None for x in data.extras]
     has_fix_line = any(x is not None and x.startswith("FIX") for x in xlines)
     flines = [f"FIX {' '.join(str(i) for i in data.fixed.tolist())}"] if (
         fmt == "g2o" and len(data.fixed) and not has_fix_line) else []

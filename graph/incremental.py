@@ -33,6 +33,7 @@ from graph.factors import (
     to_pose,
     values_from_array,
 )
+from graph.ids import id_array
 from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, checked_edge, information_from
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult
@@ -420,7 +421,7 @@ class IncrementalPoseGraph:
             return np.zeros(0, np.int64), np.zeros((0, POSE_WIDTH[self.dim]))
         if self._estimate is None:
             self._estimate = self._isam.calculateEstimate()
-        return np.asarray(self._ids[:n], np.int64), array_from_values(self.dim, self._estimate, n)
+        return id_array(self._ids[:n]), array_from_values(self.dim, self._estimate, n)
 
     def pose(self, node_id: int) -> np.ndarray:
         """Current pose of one node (a node not yet handed to iSAM2 returns its guess)."""
@@ -460,7 +461,7 @@ class IncrementalPoseGraph:
                 poses[k] = g
         ids_est, est = self.estimate()
         poses[:len(ids_est)] = est
-        ids = np.asarray(self._ids, np.int64)
+        ids = id_array(self._ids)
         if not self._edges:
             return PoseGraphData(self.dim, ids, poses, [], [], np.zeros((0, w)), np.zeros((0, d, d)), [], [])
         ki, kj, z, info, lp, p = zip(*self._edges)

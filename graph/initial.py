@@ -6,6 +6,7 @@ from collections import deque
 import gtsam
 import numpy as np
 
+from graph.errors import GraphError
 from graph.factors import array_from_values, from_pose, to_pose
 from graph.model import POSE_WIDTH, PoseGraphData
 
@@ -71,11 +72,36 @@ def spanning_tree_guess(data: PoseGraphData, anchors: np.ndarray, anchor_poses: 
     return out
 
 
+class InitialGuessError(GraphError, RuntimeError):
+    """LAGO / chordal cannot initialise this graph (a part no factor ties to an anchor). A RuntimeError as well, so
+    callers that already fall back on gtsam's own RuntimeError keep doing so."""
+
+
 def lago_guess(graph: gtsam.NonlinearFactorGraph, n: int) -> np.ndarray:
-    """gtsam LAGO on a planar graph of Gaussian BetweenFactorPose2 plus a PriorFactorPose2 (required)."""
-    return array_from_values(2, gtsam.lago.initialize(graph), n)
+    """gtsam LAGO on a planar graph of Gaussian BetweenFactorPose2 plus a PriorFactorPose2 (required).
+
+    LAGO's default orientation tree follows the odometric path (a factor between keys k and k+1 for every k); a
+    chain broken anywhere (ETHCampus, ids seen only on edges) makes gtsam fail with `map::at`, so then the minimum
+    spanning tree is used instead. Both fail only when some node has no path to a prior: InitialGuessError.
+    """
+    try:
+        return array_from_values(2, gtsam.lago.initialize(graph), n)
+    except (IndexError, RuntimeError, ValueError):
+        pass
+    try:
+        return array_from_values(2, gtsam.lago.initialize(graph, False), n)
+    except (IndexError, RuntimeError, ValueError) as exc:
+        raise InitialGuessError(f"LAGO cannot initialise the graph: {_first_line(exc)}") from exc
 
 
 def chordal_guess(graph: gtsam.NonlinearFactorGraph, n: int) -> np.ndarray:
     """gtsam chordal rotation relaxation + translation solve on a Pose3 graph with a prior."""
-    return array_from_values(3, gtsam.InitializePose3.initialize(graph), n)
+    try:
+        return array_from_values(3, gtsam.InitializePose3.initialize(graph), n)
+    except (IndexError, RuntimeError, ValueError) as exc:
+        raise InitialGuessError(f"chordal initialisation cannot solve the graph: {_first_line(exc)}") from exc
+
+
+def _first_line(exc: BaseException) -> str:
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return " ".join(lines[:2]) if lines else type(exc).__name__

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from graph.ids import common_ids, id_array
+
 POSE_WIDTH = {2: 3, 3: 7}
 TANGENT_DIM = {2: 3, 3: 6}
 
@@ -27,7 +29,7 @@ TANGENT_DIM = {2: 3, 3: 6}
 @dataclass
 class PoseGraphData:
     dim: int
-    node_ids: np.ndarray                  # (N,) int64, input order
+    node_ids: np.ndarray                  # (N,) int64, input order (object of Python ints past int64: graph.ids)
     poses: np.ndarray                     # (N, 3|7) initial guesses; NaN rows where none was given
     edge_from: np.ndarray                 # (M,) int64 node ids
     edge_to: np.ndarray                   # (M,) int64 node ids
@@ -44,15 +46,13 @@ class PoseGraphData:
         if self.dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {self.dim}")
         w, d = POSE_WIDTH[self.dim], TANGENT_DIM[self.dim]
-        self.node_ids = np.asarray(self.node_ids, dtype=np.int64).reshape(-1)
         self.poses = np.asarray(self.poses, dtype=float).reshape(-1, w)
-        self.edge_from = np.asarray(self.edge_from, dtype=np.int64).reshape(-1)
-        self.edge_to = np.asarray(self.edge_to, dtype=np.int64).reshape(-1)
         self.measurements = np.asarray(self.measurements, dtype=float).reshape(-1, w)
         self.information = np.asarray(self.information, dtype=float).reshape(-1, d, d)
         self.is_loop = np.asarray(self.is_loop, dtype=bool).reshape(-1)
         self.probability = np.asarray(self.probability, dtype=float).reshape(-1)
-        self.fixed = np.asarray(self.fixed, dtype=np.int64).reshape(-1)
+        self.node_ids, self.edge_from, self.edge_to, self.fixed = common_ids(
+            id_array(self.node_ids), id_array(self.edge_from), id_array(self.edge_to), id_array(self.fixed))
         m = len(self.edge_from)
         if len(self.poses) != len(self.node_ids):
             raise ValueError(f"{len(self.poses)} poses for {len(self.node_ids)} node ids")
@@ -79,16 +79,17 @@ class PoseGraphData:
 
     def index_of(self, ids: np.ndarray) -> np.ndarray:
         """Positions (0..N-1) of node ids; raises KeyError naming an unknown id."""
-        ids = np.asarray(ids, dtype=np.int64)
-        order = np.argsort(self.node_ids, kind="stable")
-        sorted_ids = self.node_ids[order]
+        shape = np.shape(ids)
+        ids, node_ids = common_ids(id_array(ids), self.node_ids)
+        order = np.argsort(node_ids, kind="stable")
+        sorted_ids = node_ids[order]
         pos = np.searchsorted(sorted_ids, ids)
         pos_c = np.clip(pos, 0, max(len(sorted_ids) - 1, 0))
         ok = (pos < len(sorted_ids)) & (sorted_ids[pos_c] == ids) if len(sorted_ids) else np.zeros(ids.shape, bool)
         if not np.all(ok):
             bad = ids[~ok].reshape(-1)[0]
             raise KeyError(f"unknown node id {int(bad)}")
-        return order[pos_c]
+        return order[pos_c].reshape(shape)
 
     def edge_index_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """Edges as node positions (a, b)."""
@@ -114,11 +115,11 @@ class PoseGraphData:
     def append_edges(self, i: np.ndarray, j: np.ndarray, z: np.ndarray, info: np.ndarray, is_loop: np.ndarray,
                      probability: np.ndarray | None = None) -> "PoseGraphData":
         """A copy with edges appended after the existing ones (layout dropped)."""
-        i = np.asarray(i, np.int64).reshape(-1)
+        i = id_array(i)
         p = np.ones(len(i)) if probability is None else np.asarray(probability, float).reshape(-1)
         w, d = POSE_WIDTH[self.dim], TANGENT_DIM[self.dim]
         return PoseGraphData(self.dim, self.node_ids.copy(), self.poses.copy(), np.concatenate([self.edge_from, i]),
-                             np.concatenate([self.edge_to, np.asarray(j, np.int64).reshape(-1)]),
+                             np.concatenate([self.edge_to, id_array(j)]),
                              np.concatenate([self.measurements, np.asarray(z, float).reshape(-1, w)]),
                              np.concatenate([self.information, np.asarray(info, float).reshape(-1, d, d)]),
                              np.concatenate([self.is_loop, np.broadcast_to(np.asarray(is_loop, bool), len(i))]),
@@ -172,7 +173,7 @@ def information_from(cov: np.ndarray | None, information: np.ndarray | None, d: 
 
 def classify_edges(node_ids: np.ndarray, edge_from: np.ndarray, edge_to: np.ndarray) -> np.ndarray:
     """The file rule: True (loop) unless the two nodes are consecutive in input order."""
-    node_ids = np.asarray(node_ids, np.int64)
+    node_ids, edge_from, edge_to = common_ids(id_array(node_ids), id_array(edge_from), id_array(edge_to))
     order = np.argsort(node_ids, kind="stable")
     sorted_ids = node_ids[order]
     # sorted_ids[r] == node_ids[order[r]], so order[rank] is the position in input order

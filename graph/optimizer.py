@@ -9,7 +9,9 @@ import numpy as np
 
 from graph import incremental
 from graph.batch import solve
+from graph.components import anchor_components, loops_join_odometry_parts
 from graph.errors import GraphError
+from graph.factors import anchor_nodes
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult
@@ -18,13 +20,47 @@ from graph.thresholds import loop_thresholds
 
 def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: Solver | str | None = None,
              robust: RobustMode | str | None = None, init: InitMethod | str | None = None) -> GraphResult:
-    """Optimise a pose graph; keyword arguments override the corresponding `params` fields."""
+    """Optimise a pose graph; keyword arguments override the corresponding `params` fields.
+
+    Every component of the graph is anchored (graph.components: a warning names them when there is more than one).
+    Should gtsam still fail (an indeterminate system, a key it cannot find), the graph is solved once more from the
+    odometry tree with batch LM and no gate; a second failure is a GraphError naming the cause, never gtsam's.
+    """
     over = {k: v for k, v in (("solver", solver), ("robust", robust), ("init", init)) if v is not None}
     params = (params or GraphParams()).replace(**over)
     if data.num_nodes == 0:
         raise GraphError("the pose graph has no nodes")
+    data, notes = anchor_components(data)
+    try:
+        res = _optimize(data, params)
+    except GraphError:
+        raise
+    except (RuntimeError, IndexError, ValueError) as exc:
+        plain = params.replace(solver=Solver.LM, init=InitMethod.ODOMETRY, gate_loops=False)
+        try:
+            res = _optimize(data, plain)
+        except GraphError:
+            raise
+        except (RuntimeError, IndexError, ValueError) as exc2:
+            raise GraphError(f"the solver failed on this graph: {_first_line(exc2)} (first attempt: "
+                             f"{_first_line(exc)})") from exc2
+        res.notes.insert(0, f"solved from the odometry tree with batch LM after: {_first_line(exc)}")
+    res.notes[:0] = notes
+    return res
+
+
+def _first_line(exc: BaseException) -> str:
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return f"{type(exc).__name__}: {' '.join(lines[:2])}" if lines else type(exc).__name__
+
+
+def _optimize(data: PoseGraphData, params: GraphParams) -> GraphResult:
     if params.solver == Solver.ISAM2:
         return incremental.full_pass(data, params)
+    if params.robust != RobustMode.NONE and params.gate_loops and data.num_loops and loops_join_odometry_parts(data):
+        res = solve(data, params)
+        res.notes.insert(0, "loops are the only link between parts of the odometry chain: solved without the gate")
+        return res
     if params.robust != RobustMode.NONE and params.gate_loops and data.num_loops:
         t0 = time.perf_counter()
         try:
@@ -37,6 +73,10 @@ def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: 
         gate_seconds = time.perf_counter() - t0
         seeded = data.copy()
         seeded.poses = estimate
+        # the gate pass anchors node 0 only: other anchors (FIX, one per component) keep their given poses
+        anc = anchor_nodes(data)
+        given = anc[data.has_pose[anc]]
+        seeded.poses[given] = data.poses[given]
         res = solve(seeded, params.replace(init=InitMethod.GIVEN), candidates=admitted)
         res.seconds += gate_seconds
         res.init_seconds += gate_seconds

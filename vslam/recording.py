@@ -1,94 +1,99 @@
-"""Rerun recording of a SLAM run: one place for entity paths, styles and the default blueprint.
+"""Rerun recording of a SLAM run as a 3D scene (entity layout and blueprint: vslam.recording_layout).
 
-Entities (timelines `frame` and `time`):
-    /camera/image                 the camera image (JPEG), with /keypoints and VO inlier /matches
-    /world/...                    3D: trajectories (VO, SLAM, ground truth), robot pose, footprint, loop edges
-    /map/...                      the same seen from above in 2D (y up: points are logged as (x, -y))
-    /metrics/vo/*, /metrics/loops/*, /metrics/timing/*   time series
-    /log                          text events (loops closed, tracking lost)
-The file is written to a temporary name and renamed into place when `close()` finalises it.
+The robot moves over a floor plane; its camera hangs under it with a Pinhole, so the viewer draws the frustum and
+the (downscaled, JPEG) image where it lies on the floor. Trajectories are line strips (SLAM redrawn whenever the
+pose graph is optimised, so scrubbing the timeline shows the correction), loops are arcs between the two poses,
+coloured by the back end's verdict. The file is written to a temporary name and renamed into place by `close()`.
 """
 from __future__ import annotations
 
 import os
+from datetime import timedelta
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from odometry.shared.poses import transform_points
 from odometry.shared.rotations import yaw_to_quat
+from vslam import recording_layout as lay
+from vslam.evaluation.plots import start_anchored
+from vslam.recording_camera import encode_image, mount_transform, pinhole, scale_pixels, scaled_size
 
-GREEN, RED, GREY = (40, 190, 60), (220, 40, 40), (160, 160, 160)
-COLOURS = {"vo": (255, 140, 0), "slam": (30, 120, 230), "gt": (90, 90, 90)}
-_CHUNK = 50  # frames per incremental trajectory segment (keeps logging O(N))
-_SCALAR_FLUSH = 200  # frames of buffered time series per send_columns call
-
-
-def _flip(xy: np.ndarray) -> np.ndarray:
-    """World (x, y) -> 2D view coordinates: rerun's 2D views have y down; the map keeps y up."""
-    xy = np.asarray(xy, dtype=np.float32)
-    return np.column_stack([xy[:, 0], -xy[:, 1]])
+_CHUNK = 10          # poses per trajectory segment: the drawn line lags the robot by at most this many frames
+_SCALAR_FLUSH = 200  # frames of buffered time series per send_columns call (one log call per value costs ~1 ms)
+_ARC_POINTS = 13     # points per loop arc
+_Z_LINES = 0.003     # trajectories and loops drawn 3 mm above the floor plane so that the plane never hides them
 
 
-def blueprint():
-    import rerun.blueprint as rrb
+def loop_arc(a: np.ndarray, b: np.ndarray, rise: float) -> np.ndarray:
+    """A loop edge from a to b (x, y) as a 3D arc that rises `rise` metres plus a quarter of its length: a loop
+    joins two visits of one place, so a straight segment between them is often too short to see."""
+    a, b = np.asarray(a, float)[:2], np.asarray(b, float)[:2]
+    t = np.linspace(0.0, 1.0, _ARC_POINTS)[:, None]
+    xy = a + t * (b - a)
+    top = rise + 0.25 * float(np.linalg.norm(b - a))
+    return np.column_stack([xy, _Z_LINES + 4.0 * top * t[:, 0] * (1.0 - t[:, 0])]).astype(np.float32)
 
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Spatial2DView(origin="/camera/image", name="camera"),
-                rrb.TimeSeriesView(origin="/metrics", name="metrics"),
-                row_shares=[3, 2],
-            ),
-            rrb.Vertical(
-                rrb.Spatial2DView(origin="/map", name="top-down map"),
-                rrb.Horizontal(rrb.Spatial3DView(origin="/world", name="3D"),
-                               rrb.TextLogView(origin="/log", name="events")),
-                row_shares=[3, 2],
-            ),
-            column_shares=[2, 3],
-        ),
-        collapse_panels=True,
-    )
+
+def loop_ring(centre: np.ndarray, radius: float, z: float) -> np.ndarray:
+    """A circle on the floor around a loop's query pose: the place of a loop stays visible when the arc is a
+    vertical line (both visits at one spot) or hidden in the camera's frustum."""
+    a = np.linspace(0.0, 2 * np.pi, 25)
+    c = np.asarray(centre, float)[:2]
+    return np.column_stack([c[0] + radius * np.cos(a), c[1] + radius * np.sin(a), np.full(len(a), z)]).astype(
+        np.float32)
+
+
+def _on_floor(xy: np.ndarray) -> np.ndarray:
+    xy = np.asarray(xy, np.float32).reshape(-1, 2)
+    return np.column_stack([xy, np.full(len(xy), _Z_LINES, np.float32)])
 
 
 class RunRecorder:
-    """Log a run to an .rrd file without a viewer."""
+    """Log a run to an .rrd file without a viewer.
 
-    def __init__(self, path: str | Path, camera=None, recording_id: str = "vslam", jpeg_quality: int = 75,
-                 image_every: int = 1, application_id: str = "vslam"):
+    image_every: log every n-th camera image (with its keypoints and matches); image_scale: fraction of the full
+    resolution the image is logged at; jpeg_quality: 0-100. The defaults keep the demo at a few kB per frame."""
+
+    def __init__(self, path: str | Path, camera=None, recording_id: str = "vslam", jpeg_quality: int = 60,
+                 image_every: int = 3, application_id: str = "vslam", image_scale: float = 0.5):
         import rerun as rr
 
         self.rr = rr
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmp = self.path.with_name(f".{self.path.name}.partial")
-        self.rec = rr.RecordingStream(application_id, recording_id=recording_id, send_properties=False)
-        self.rec.save(str(self._tmp), default_blueprint=blueprint())
+        # chunks cut by size, never by a wall-clock tick: the default 0.2 s tick makes the file's size depend on
+        # the machine's load (small chunks each carry their own schema)
+        batching = rr.ChunkBatcherConfig(flush_tick=timedelta(hours=1), flush_num_bytes=1 << 20)
+        self.rec = rr.RecordingStream(application_id, recording_id=recording_id, send_properties=False,
+                                      batcher_config=batching)
+        self.rec.save(str(self._tmp))       # the blueprint is sent by close(), when the scene's extent is known
         self.rec.set_log_time_enabled(False)
-        self.jpeg = [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)]
+        self.jpeg_quality = int(jpeg_quality)
         self.image_every = max(1, int(image_every))
+        self.image_scale = float(image_scale)
         self.camera = camera
         self._seg: dict[str, list] = {"vo": [], "slam": []}
         self._seg_id: dict[str, int] = {"vo": 0, "slam": 0}
-        self._loops: dict[str, list] = {"accepted": [], "rejected": []}
+        self._loops: dict[str, list] = {"kept": [], "rejected": [], "candidates": []}
         self._scalars: dict[str, tuple[list, list, list]] = {}
         self._frame, self._time, self._flushed_at = 0, 0.0, 0
+        self._lo, self._hi = np.full(2, np.inf), np.full(2, -np.inf)   # extent of everything drawn on the floor
         rec = self.rec
         rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        for path_, names in (("/metrics/vo/inliers", "VO inliers"), ("/metrics/vo/inlier_ratio", "VO inlier ratio"),
-                             ("/metrics/loops/local_score", "loop local score"),
-                             ("/metrics/loops/global_score", "loop global score"),
-                             ("/metrics/loops/probability", "P(loop | score)"),
-                             ("/metrics/timing/vo_ms", "VO ms"), ("/metrics/timing/loops_ms", "loops ms"),
-                             ("/metrics/timing/graph_ms", "graph ms"), ("/metrics/timing/frame_ms", "frame ms")):
-            rec.log(path_, rr.SeriesLines(names=names), static=True)
-        if camera is not None and camera.camera_height is not None:
-            fp = camera.footprint()
-            closed = np.vstack([fp, fp[:1]])
-            rec.log("/world/robot/footprint", rr.LineStrips3D([np.column_stack([closed, np.zeros(len(closed))])],
-                                                              colors=[(250, 200, 0)]), static=True)
+        for series in lay.SERIES.values():
+            for path_, name in series:
+                rec.log(f"/metrics/{path_}", rr.SeriesLines(names=name), static=True)
+        self._size = None
+        if camera is not None:
+            self._size = scaled_size(camera, self.image_scale)
+            self._sx, self._sy = self._size[0] / camera.width, self._size[1] / camera.height
+            if camera.camera_height is not None:
+                rec.log(lay.CAMERA, mount_transform(camera), static=True)
+                rec.log(lay.IMAGE, pinhole(camera, self.image_scale), static=True)
+                fp = camera.footprint()
+                rec.log(lay.FOOTPRINT, rr.LineStrips3D([_on_floor(np.vstack([fp, fp[:1]]))], colors=[lay.YELLOW],
+                                                       radii=0.004), static=True)
 
     # ------------------------------------------------------------------ per frame
     def set_frame(self, index: int, timestamp: float) -> None:
@@ -98,76 +103,79 @@ class RunRecorder:
 
     def log_image(self, index: int, image: np.ndarray, keypoints: np.ndarray | None = None,
                   matches: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """Every `image_every`-th frame: the image (downscaled, JPEG), its keypoints and VO inlier matches."""
         rr = self.rr
         if index % self.image_every:
             return
-        ok, buf = cv2.imencode(".jpg", image, self.jpeg)
-        if ok:
-            self.rec.log("/camera/image", rr.EncodedImage(contents=buf.tobytes(), media_type="image/jpeg"))
+        size = self._size or (image.shape[1], image.shape[0])
+        sx, sy = (self._sx, self._sy) if self._size else (1.0, 1.0)
+        blob = encode_image(image, size, self.jpeg_quality)
+        if blob is not None:
+            self.rec.log(lay.IMAGE, rr.EncodedImage(contents=blob, media_type="image/jpeg"))
         if keypoints is not None and len(keypoints):
-            self.rec.log("/camera/image/keypoints", rr.Points2D(np.asarray(keypoints, np.float32), radii=1.5,
-                                                                colors=[(255, 230, 0)]))
+            self.rec.log(lay.KEYPOINTS, rr.Points2D(scale_pixels(keypoints, sx, sy), radii=1.0, colors=[lay.YELLOW]))
         if matches is not None and len(matches[0]):
-            a, b = (np.asarray(m, np.float32) for m in matches)
-            self.rec.log("/camera/image/matches", rr.LineStrips2D(np.stack([a, b], axis=1), colors=[GREEN], radii=0.5))
+            a, b = scale_pixels(matches[0], sx, sy), scale_pixels(matches[1], sx, sy)
+            self.rec.log(lay.MATCHES, rr.LineStrips2D(np.stack([a, b], axis=1), colors=[lay.GREEN], radii=0.4))
 
     def log_pose(self, pose: np.ndarray, which: str = "vo") -> None:
         """Append the current pose to a trajectory; the robot follows the `slam` pose when given, else `vo`."""
         rr = self.rr
+        xy = np.asarray(pose[:2], dtype=np.float32)
+        self._grow(xy[None])
         seg = self._seg[which]
-        seg.append(np.asarray(pose[:2], dtype=np.float32))
+        seg.append(xy)
         if len(seg) >= _CHUNK:
             self._flush_segment(which)
         if which == "slam" or not self._seg["slam"]:
             q = [float(v) for v in yaw_to_quat(pose[2])]
-            self.rec.log("/world/robot", rr.Transform3D(translation=[float(pose[0]), float(pose[1]), 0.0], quaternion=q))
-            if self.camera is not None and self.camera.camera_height is not None:
-                fp = transform_points(pose, self.camera.footprint())
-                self.rec.log("/map/footprint", rr.LineStrips2D([_flip(np.vstack([fp, fp[:1]]))], colors=[(250, 200, 0)]))
+            self.rec.log(lay.ROBOT, rr.Transform3D(translation=[float(pose[0]), float(pose[1]), 0.0], quaternion=q))
+
+    def _grow(self, xy: np.ndarray) -> None:
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        xy = xy[np.all(np.isfinite(xy), axis=1)]
+        if len(xy):
+            self._lo = np.minimum(self._lo, xy.min(axis=0))
+            self._hi = np.maximum(self._hi, xy.max(axis=0))
+
+    def _strip(self, which: str, k: int, pts: np.ndarray) -> None:
+        radius = 0.006 if which == "slam" else 0.004
+        self.rec.log(f"{lay.TRAJECTORY}/{which}/{k}", self.rr.LineStrips3D([_on_floor(pts)], colors=[lay.COLOURS[which]],
+                                                                          radii=radius))
 
     def _flush_segment(self, which: str, keep_last: bool = True) -> None:
-        rr = self.rr
         seg = self._seg[which]
         if len(seg) < 2:
             return
-        pts = np.asarray(seg)
         k = self._seg_id[which]
-        self.rec.log(f"/world/trajectory/{which}/{k}", rr.LineStrips3D([np.column_stack([pts, np.zeros(len(pts))])],
-                                                                       colors=[COLOURS[which]], radii=0.01))
-        self.rec.log(f"/map/trajectory/{which}/{k}", rr.LineStrips2D([_flip(pts)], colors=[COLOURS[which]], radii=0.01))
+        self._strip(which, k, np.asarray(seg))
         self._seg_id[which] = k + 1
         self._seg[which] = [seg[-1]] if keep_last else []
 
     def replace_trajectory(self, which: str, poses: np.ndarray) -> None:
-        """Redraw a whole trajectory (after an optimisation moved it): one strip replaces the segments."""
-        rr = self.rr
-        for k in range(self._seg_id[which]):
-            self.rec.log(f"/world/trajectory/{which}/{k}", rr.Clear(recursive=False))
-            self.rec.log(f"/map/trajectory/{which}/{k}", rr.Clear(recursive=False))
-        self._seg_id[which] = 0
-        self._seg[which] = [np.asarray(p[:2], np.float32) for p in poses]
-        pts = np.asarray(poses, dtype=np.float32)[:, :2]
-        self.rec.log(f"/world/trajectory/{which}/0", rr.LineStrips3D([np.column_stack([pts, np.zeros(len(pts))])],
-                                                                     colors=[COLOURS[which]], radii=0.01))
-        self.rec.log(f"/map/trajectory/{which}/0", rr.LineStrips2D([_flip(pts)], colors=[COLOURS[which]], radii=0.01))
+        """Redraw a whole trajectory (after an optimisation moved it): one strip replaces the segments, logged at
+        the current frame, so the timeline shows the trajectory before and after."""
+        pts = np.asarray(poses, dtype=np.float32).reshape(-1, 3)[:, :2] if len(poses) else np.zeros((0, 2))
+        for k in range(1, self._seg_id[which]):
+            self.rec.log(f"{lay.TRAJECTORY}/{which}/{k}", self.rr.Clear(recursive=False))
+        if len(pts) >= 2:
+            self._strip(which, 0, pts)
+        self._grow(pts)
         self._seg_id[which] = 1
-        self._seg[which] = [self._seg[which][-1]] if len(poses) else []
+        self._seg[which] = [pts[-1]] if len(pts) else []
 
     def log_groundtruth(self, poses: np.ndarray) -> None:
-        rr = self.rr
-        p = np.asarray(poses, dtype=np.float32)
+        """Ground truth (N, 3), drawn from where the estimate starts (the frame of its first valid pose)."""
+        p = start_anchored(poses).astype(np.float32)
         p = p[~np.isnan(p[:, 0])]
         if len(p) < 2:
             return
-        self.rec.log("/world/trajectory/gt", rr.LineStrips3D([np.column_stack([p[:, :2], np.zeros(len(p))])],
-                                                             colors=[COLOURS["gt"]], radii=0.006), static=True)
-        self.rec.log("/map/trajectory/gt", rr.LineStrips2D([_flip(p[:, :2])], colors=[COLOURS["gt"]], radii=0.006),
-                     static=True)
+        self._grow(p[:, :2])
+        self.rec.log(f"{lay.TRAJECTORY}/gt", self.rr.LineStrips3D([_on_floor(p[:, :2])], colors=[lay.COLOURS["gt"]],
+                                                                  radii=0.003), static=True)
 
     def log_scalars(self, **values: float) -> None:
-        """Time series, e.g. log_scalars(**{"vo/inliers": 120, "timing/vo_ms": 4.2}).
-
-        Buffered and sent as columns every `_SCALAR_FLUSH` frames: one log call per value cost ~1 ms each."""
+        """Time series, e.g. log_scalars(**{"vo/inliers": 120, "timing/vo_ms": 4.2}); buffered, sent as columns."""
         for k, v in values.items():
             if v is not None and np.isfinite(v):
                 buf = self._scalars.setdefault(k, ([], [], []))
@@ -187,40 +195,67 @@ class RunRecorder:
         self._scalars = {}
         self._flushed_at = self._frame
 
-    def log_loop(self, query_pose: np.ndarray, match_pose: np.ndarray, accepted: bool) -> None:
-        """Add a loop edge (green accepted, red rejected) and redraw the loop layers."""
-        kind = "accepted" if accepted else "rejected"
+    # ------------------------------------------------------------------ loops
+    def log_loop(self, query_pose: np.ndarray, match_pose: np.ndarray, accepted: bool | str = True) -> None:
+        """Add one loop edge: True / "kept" (green), False / "rejected" (red, by the back end), or "candidates"
+        (grey: verified but below the detector's threshold; hidden in the default view)."""
+        kind = accepted if isinstance(accepted, str) else ("kept" if accepted else "rejected")
         self._loops[kind].append(np.array([query_pose[:2], match_pose[:2]], dtype=np.float32))
         self._draw_loops(kind)
 
-    def set_loops(self, accepted: list, rejected: list) -> None:
-        """Replace all loop edges (e.g. after the back end relabelled some as outliers)."""
-        self._loops = {"accepted": [np.asarray(s, np.float32) for s in accepted],
-                       "rejected": [np.asarray(s, np.float32) for s in rejected]}
-        self._draw_loops("accepted")
-        self._draw_loops("rejected")
+    def set_loops(self, kept: list, rejected: list, candidates: list | None = None) -> None:
+        """Replace the loop edges (after the back end relabelled some, or the poses moved); candidates are kept
+        as they are when None."""
+        self._loops["kept"] = [np.asarray(s, np.float32) for s in kept]
+        self._loops["rejected"] = [np.asarray(s, np.float32) for s in rejected]
+        kinds = ["kept", "rejected"]
+        if candidates is not None:
+            self._loops["candidates"] = [np.asarray(s, np.float32) for s in candidates]
+            kinds.append("candidates")
+        for kind in kinds:
+            self._draw_loops(kind)
 
     def _draw_loops(self, kind: str) -> None:
         rr = self.rr
         segs = self._loops[kind]
-        colour = GREEN if kind == "accepted" else RED
+        path = f"{lay.LOOPS}/{kind}"
         if not segs:
-            self.rec.log(f"/world/loops/{kind}", rr.Clear(recursive=False))
-            self.rec.log(f"/map/loops/{kind}", rr.Clear(recursive=False))
+            self.rec.log(path, rr.Clear(recursive=False))
             return
-        self.rec.log(f"/world/loops/{kind}", rr.LineStrips3D([np.column_stack([s, np.zeros(2)]) for s in segs],
-                                                              colors=[colour], radii=0.008))
-        self.rec.log(f"/map/loops/{kind}", rr.LineStrips2D([_flip(s) for s in segs], colors=[colour], radii=0.008))
+        h = self.camera.camera_height if self.camera is not None and self.camera.camera_height else 0.5
+        # low arcs (a loop at one spot is a pin 0.3 h tall) with a small ring at the foot, just above the image plane
+        # (0.02 h above the floor): visible, yet dozens of them do not bury the trajectory
+        strips = [loop_arc(s[0], s[1], 0.3 * h) for s in segs]
+        if kind != "candidates":
+            strips += [loop_ring(s[0], 0.08 * h, 0.03 * h) for s in segs]
+        radius = 0.002 if kind == "candidates" else 0.005
+        self.rec.log(path, rr.LineStrips3D(strips, colors=[lay.LOOP_COLOURS[kind]], radii=radius))
 
     def log_text(self, message: str, level: str = "INFO") -> None:
         rr = self.rr
-        self.rec.log("/log", rr.TextLog(message, level=getattr(rr.TextLogLevel, level, rr.TextLogLevel.INFO)))
+        self.rec.log(lay.LOG, rr.TextLog(message, level=getattr(rr.TextLogLevel, level, rr.TextLogLevel.INFO)))
 
     # ------------------------------------------------------------------ end
+    def _log_floor(self) -> np.ndarray | None:
+        """The floor plane under everything drawn (static); returns the scene's (xmin, ymin, xmax, ymax)."""
+        if not np.all(np.isfinite(self._lo)):
+            return None
+        margin = 0.5
+        if self.camera is not None and self.camera.camera_height is not None:
+            margin = float(np.abs(self.camera.footprint()).max()) + 0.1
+        (x0, y0), (x1, y1) = self._lo - margin, self._hi + margin
+        quad = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]], np.float32)
+        self.rec.log(lay.FLOOR, self.rr.Mesh3D(vertex_positions=quad, triangle_indices=[[0, 1, 2], [0, 2, 3]],
+                                               vertex_normals=[[0, 0, 1]] * 4, albedo_factor=(215, 215, 210)),
+                     static=True)
+        return np.array([x0, y0, x1, y1])
+
     def close(self) -> Path:
         self._flush_scalars()
         for which in ("vo", "slam"):
             self._flush_segment(which, keep_last=False)
+        bounds = self._log_floor()
+        self.rec.send_blueprint(lay.blueprint(bounds), make_active=True, make_default=True)
         self.rec.disconnect()   # finalises the file (footer)
         os.replace(self._tmp, self.path)
         return self.path

@@ -14,8 +14,11 @@ from loops.cdvs.codec import decode, encode
 from loops.cdvs.database import Candidate, DatabaseParams, LoopDatabase
 from loops.cdvs.params import CdvsParams
 from loops.cdvs.trained import TrainedParams, load_trained
+from loops.loop_detector import MotionGate
+from odometry.shared.camera import CameraModel
 
-LOOPS_CSV_HEADER = ("query_frame", "match_frame", "global_score", "local_score", "probability", "accepted")
+LOOPS_CSV_HEADER = ("query_frame", "match_frame", "global_score", "local_score", "probability", "accepted",
+                    "motion_consistent")
 
 
 @dataclass(frozen=True)
@@ -26,7 +29,8 @@ class LoopRow:
     def csv(self) -> str:
         c = self.candidate
         p = "" if c.probability is None else f"{c.probability:.4f}"
-        return f"{self.query_frame},{c.frame_id},{c.global_score:.5f},{c.local_score:.4f},{p},{int(c.accepted)}"
+        m = "" if c.motion_consistent is None else str(int(c.motion_consistent))
+        return f"{self.query_frame},{c.frame_id},{c.global_score:.5f},{c.local_score:.4f},{p},{int(c.accepted)},{m}"
 
 
 @dataclass
@@ -43,11 +47,16 @@ class DetectionStats:
 def detect_loops(frames: Iterable[tuple[int, np.ndarray | None]], mode: int, params: CdvsParams | None = None,
                  db_params: DatabaseParams | None = None, model=None, trained: TrainedParams | None = None,
                  threshold: float | None = None,
-                 on_frame: Callable[[int], None] | None = None) -> tuple[list[LoopRow], DetectionStats]:
-    """Run the detector over (frame index, image or None if unreadable) pairs in increasing frame order."""
+                 on_frame: Callable[[int], None] | None = None, stamps: np.ndarray | None = None,
+                 poses: np.ndarray | None = None, camera: CameraModel | None = None,
+                 gate: MotionGate | None = None) -> tuple[list[LoopRow], DetectionStats]:
+    """Run the detector over (frame index, image or None if unreadable) pairs in increasing frame order.
+    `stamps` / `poses`: per frame index, time (s) and odometry pose (x, y, theta), for the time and footprint
+    exclusion of recent keyframes (with `camera`); `gate`: the motion check of verified candidates."""
     trained = trained or load_trained()
     params = params or CdvsParams.for_mode(mode)
-    db = LoopDatabase(mode, params, db_params, model=model, trained=trained, threshold=threshold)
+    db = LoopDatabase(mode, params, db_params, model=model, trained=trained, threshold=threshold, camera=camera,
+                      gate=gate)
     rows: list[LoopRow] = []
     st = DetectionStats()
     for k, (idx, img) in enumerate(frames):
@@ -60,8 +69,9 @@ def detect_loops(frames: Iterable[tuple[int, np.ndarray | None]], mode: int, par
         data = encode(img, mode, params, trained)
         d = decode(data)
         t1 = time.perf_counter()
-        cands = db.query(d, idx)
-        db.add(idx, d)
+        stamp = None if stamps is None else float(stamps[idx])
+        cands = db.query(d, idx, stamp)
+        db.add(idx, d, stamp, None if poses is None else poses[idx])
         t2 = time.perf_counter()
         st.frames += 1
         st.bytes_total += len(data)

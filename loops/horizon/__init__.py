@@ -12,6 +12,7 @@ the line x_test = b_s * x_stored + b_d that tells how the robot turned (b_d) and
     test = extract_features(image_b, row=183, params=params)
     result = match(test, stored, params)          # .score, .score_ransac, .b_s, .b_d, .inliers
 """
+from loops.horizon.bands import BandsMatch, band_rows, extract_bands, match_bands
 from loops.horizon.matching import MatchResult, fit_line_ransac, match, nn_matches
 from loops.horizon.memory import (
                                   MEMORY_VERSION,
@@ -28,7 +29,7 @@ from loops.horizon.signal import HorizonError, HorizonLine, horizon_signal, samp
 from loops.horizon.surf1d import HorizonFeatures, detect_and_describe, extract_features, lobe_sizes, responses
 
 __all__ = [
-    "HorizonError", "HorizonFeatures", "HorizonLine", "HorizonParams", "HorizonRecognizer", "HorizonVerifier",
+    "BandsMatch", "band_rows", "extract_bands", "match_bands", "HorizonError", "HorizonFeatures", "HorizonLine", "HorizonParams", "HorizonRecognizer", "HorizonVerifier",
     "Landmark", "LandmarkMemory", "MEMORY_VERSION", "MatchResult", "MemoryFormatError", "PRESETS", "Recognition",
     "SampleMode", "detect_and_describe", "extract_features", "fit_line_ransac", "horizon_signal", "load_memory",
     "lobe_sizes", "match", "nn_matches", "responses", "sample_columns", "save_memory",

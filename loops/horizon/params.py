@@ -31,6 +31,9 @@ class HorizonParams(Config):
         # Two checks the paper does not make: one test feature per stored feature, and inliers whose feature-scale
         # ratio agrees with the fitted b_s. A little more discriminative (see `vslam bench horizon`).
         "robust": {"one_to_one": True, "scale_tolerance": 0.75},
+        # Small real frames (e.g. 160x120): every column sampled, seven 12-row bands matched band by band
+        # (loops.horizon.bands). Chosen on the tuning half of the real pairs of `vslam bench horizon --real`.
+        "bands": {"step": 1, "band_height": 12, "bands": 7},
     }
 
     # --- horizon signal (paper §3) ---
@@ -38,6 +41,10 @@ class HorizonParams(Config):
                                doc="rows summed at each sample; centred on the horizon row")
     step: int = setting(4, range="[1, inf)", unit="px", doc="image columns between samples")
     sample_mode: SampleMode = SampleMode.COLUMN
+    bands: int = setting(1, range="[1, inf)",
+                         doc="bands of band_height rows stacked around the horizon row, matched band by band "
+                             "by loops.horizon.bands (extract_bands / match_bands); extract_features, the landmark "
+                             "memory and `vslam horizon` read the horizon row's band only")
 
     # --- detector (paper §3) ---
     octaves: int = setting(4, range="[1, inf)")

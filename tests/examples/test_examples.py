@@ -109,6 +109,27 @@ def test_05_pipeline_api_writes_a_run(tmp_path):
     assert number(r"ATE slam: ([\d.]+) cm", out) < 5.0
 
 
+def test_06_recording_is_small(tmp_path):
+    out = run_example("06_view_recording_in_browser.py", "--out", tmp_path, "--no-screenshot")
+    assert number(r"([\d.]+) kB per frame", out) <= 10.0
+    assert number(r"(\d+) loops accepted", out) >= 1
+
+
+@pytest.mark.skipif(os.environ.get("VSLAM_VIEWER_TEST") != "1",
+                    reason="opt-in (VSLAM_VIEWER_TEST=1): needs Debian's chromium and websocket-client, and takes "
+                           "one to several minutes of software rendering")
+def test_06_screenshot_shows_the_scene(tmp_path):
+    run_example("06_view_recording_in_browser.py", "--out", tmp_path, "--png", tmp_path / "view.png")
+    shot = cv2.imread(str(tmp_path / "view.png"))
+    assert shot is not None and shot.shape[1] == 1600 and shot.std() > 20        # not blank
+    scene = shot[60: shot.shape[0] * 3 // 4, : shot.shape[1] * 55 // 100].astype(int)   # the 3D view
+    def near(bgr):
+        return int((np.abs(scene - np.array(bgr)).sum(axis=2) < 60).sum())
+    assert near((0, 200, 250)) > 200          # the frustum's yellow outline
+    assert near((60, 190, 40)) > 200          # loops kept by the back end (green arcs and rings)
+    assert near((230, 120, 30)) > 200         # the SLAM trajectory (blue)
+
+
 def test_quickstart_small(tmp_path):
     out = run_example("quickstart.py", tmp_path / "qs", "--length", "4", "--turn-radius", "0.3", "--size", "320x240",
                       "--fps", "4")

@@ -118,7 +118,7 @@ def test_toro_3d_rpy_round_trip(tmp_path):
 @pytest.mark.parametrize("text,line,message", [
     ("VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 1 1 0 x 1 0 0 1 0 1\n", 2, "non-numeric value 'x'"),
     ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0\n", 2, "needs 4 fields"),
-    ("VERTEX_SE2 0 0 0 0\nVERTEX_XY 1 0 0\n", 2, "unknown record type 'VERTEX_XY'"),
+    ("VERTEX_SE2 0 0 0 0\nLANDMARK 1 0 0\n", 2, "unknown record type 'LANDMARK'"),
     ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 0 1 0 0\n", 2, "duplicate vertex id 0"),
     ("\n# c\nEDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n", 3, "not positive definite"),
     ("VERTEX_SE2 0 0 0 0\nVERTEX_SE3:QUAT 1 0 0 0 0 0 0 1\n", 2, "2D and 3D mixed"),

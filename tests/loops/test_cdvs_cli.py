@@ -23,10 +23,11 @@ def image_folder(tmp_path_factory):
 def test_vslam_loops_on_an_image_folder(image_folder, tmp_path):
     out = tmp_path / "run"
     assert main(["loops", str(image_folder), "--mode", "4", "--out", str(out), "--exclude-recent", "5",
-                 "--quiet"]) == 0
+                 "--exclude-seconds", "0", "--quiet"]) == 0
     rows = list(csv.DictReader(open(out / "loops.csv")))
     assert rows and list(rows[0]) == ["query_frame", "match_frame", "global_score", "local_score", "probability",
-                                      "accepted"]
+                                      "accepted", "motion_consistent"]
+    assert all(r["motion_consistent"] == "" for r in rows)    # an image folder has no odometry: nothing checked
     for r in rows:
         assert int(r["match_frame"]) <= int(r["query_frame"]) - 5
         assert r["accepted"] in ("0", "1") and 0.0 <= float(r["probability"]) <= 1.0

@@ -2,12 +2,14 @@
 id kept, or describe one."""
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from graph import GraphParams, optimize, read_graph, write_graph
+from graph.errors import GraphError
 from odometry.shared.atomic_io import atomic_write_text
 
 LABELS_HEADER = "edge,from,to,inlier,weight,r2"
@@ -35,6 +37,7 @@ class GraphRun:
     """An optimised graph file: the report lines and whether every pose came out finite."""
     lines: list[str]
     finite: bool
+    warnings: tuple[str, ...] = ()    # what the reader and solver warned about (skipped records, disconnected parts)
 
 
 def optimize_graph_file(path: str | Path, out: str | Path, preset: str = "default", solver: str | None = None,
@@ -42,8 +45,13 @@ def optimize_graph_file(path: str | Path, out: str | Path, preset: str = "defaul
                         labels: str | Path | None = None) -> GraphRun:
     """Optimise a g2o / TORO file with a GraphParams preset and write `out` (same ids, edge order, information and
     comments); optionally the trajectory as TUM (timestamps = vertex ids) and one CSV row per loop."""
-    data = read_graph(path)
-    res = optimize(data, GraphParams.preset(preset), solver=solver, robust=robust, init=init)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        data = read_graph(path)
+        try:
+            res = optimize(data, GraphParams.preset(preset), solver=solver, robust=robust, init=init)
+        except GraphError as exc:         # the solver's errors do not know the file: name it
+            raise GraphError(f"{path}: {exc}") from exc
     write_graph(out, data, res.poses)
     lines = [f"{path}: {describe_graph(data)}",
              f"solver {res.solver}, robust {res.robust}, init {res.init}",
@@ -62,4 +70,4 @@ def optimize_graph_file(path: str | Path, out: str | Path, preset: str = "defaul
             rows.append(f"{e},{int(data.edge_from[e])},{int(data.edge_to[e])},{int(ok)},{w:.6g},{r2:.6g}")
         atomic_write_text(labels, "\n".join(rows) + "\n")
         lines.append(f"wrote {labels}")
-    return GraphRun(lines, bool(np.all(np.isfinite(res.poses))))
+    return GraphRun(lines, bool(np.all(np.isfinite(res.poses))), tuple(str(w.message) for w in caught))

@@ -65,7 +65,8 @@ def run_sequence(sequence: str | Path, out: str | Path, config: PipelineConfig |
     recorder = None
     if config.recording.enabled:
         recorder = RunRecorder(out / "recording.rrd", seq.camera, recording_id=f"vslam-{seq.name}",
-                               jpeg_quality=config.recording.jpeg_quality, image_every=config.recording.image_every)
+                               jpeg_quality=config.recording.jpeg_quality, image_every=config.recording.image_every,
+                               image_scale=config.recording.image_scale)
     try:
         result = Pipeline(config, recorder=recorder).run(seq, progress=progress, max_frames=max_frames)
     except BaseException:

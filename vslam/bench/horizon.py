@@ -26,6 +26,7 @@ from loops.horizon.pairs_file import SCORE_COLUMNS, score_pairs_file
 from odometry.shared.atomic_io import atomic_path, atomic_write_text
 from vslam.app.horizon import horizon_params
 from vslam.bench.horizon_bank import SNIPPETS, Bank, build_bank, load_crops
+from vslam.bench.horizon_real import real_pairs_table
 from vslam.bench.results import BenchResult, write_json
 from vslam.evaluation.plots import plot_roc_curves
 from vslam.evaluation.tables import format_table
@@ -140,6 +141,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="SIFT keypoints per crop, 0 = no limit (default: %(default)s)")
     parser.add_argument("--no-sift", action="store_true", help="skip the SIFT reference (quick tuning runs)")
     parser.add_argument("--quick", action="store_true", help="a smaller bank (120 matched / 500 unmatched pairs)")
+    parser.add_argument("--real-only", action="store_true",
+                        help="only the real pairs (corridor + KITTI pairs: 1D SURF vs ORB + RANSAC), not the crop bank")
+    parser.add_argument("--bands-preset", default="bands",
+                        help="HorizonParams preset of the multi-band 1D SURF on the real pairs (default: %(default)s)")
     parser.add_argument("--threads", type=int, default=1,
                         help="OpenCV threads for SIFT; 1 compares single core with single core (default: 1)")
 
@@ -293,9 +298,20 @@ def _measure(args: argparse.Namespace, params: HorizonParams, banks: dict[float,
     return {"bank": bank, "feats": feats, "res": res, "compare_auc": compare_auc, "timing": timing, "sift": sift}
 
 
+def _real(args: argparse.Namespace, data_dir: Path) -> tuple[str, dict]:
+    print("real pairs (corridor + KITTI pairs): 1D SURF vs ORB + RANSAC ...", flush=True)
+    text, res = real_pairs_table(data_dir, HorizonParams.preset(args.bands_preset))
+    print(text, flush=True)
+    return text, res
+
+
 def run(args: argparse.Namespace) -> BenchResult:
     data_dir = shared_data_dir(required=True)
     params = horizon_params(args.preset, args.overrides)
+    if args.real_only:
+        text, res = _real(args, data_dir)
+        write_json(args.out / "horizon_real.json", {"benchmark": "horizon-real", "real_pairs": res, "table": text})
+        return BenchResult(None)
     cv2.setNumThreads(max(1, args.threads))
     banks = _banks(args, data_dir)
     m = _measure(args, params, banks)
@@ -320,6 +336,8 @@ def run(args: argparse.Namespace) -> BenchResult:
     _write_bank_scores(args.out / "bank_scores.csv", bank, res, scorers)
     scored, pair_auc, kitti_line = _kitti_pairs(data_dir, args.out, params)
     print(kitti_line)
+    real_text, real_res = _real(args, data_dir)
+    cv2.setNumThreads(max(1, args.threads))
 
     write_json(args.out / "horizon.json", {
         "benchmark": "horizon",
@@ -337,11 +355,11 @@ def run(args: argparse.Namespace) -> BenchResult:
                          "sift_matching": len(sift.t_match) if sift else 0},
         "sift_features_cap": args.sift_features, "opencv_threads": args.threads,
         "nn_ransac_at_5pct_fpr": {"tpr": tpr5, "threshold": thr5},
-        "kitti_pairs": {"auc": pair_auc, "pairs": scored},
+        "kitti_pairs": {"auc": pair_auc, "pairs": scored}, "real_pairs": real_res,
         "table": table, "sweep_table": sweep_table,
     })
     print(f"wrote {args.out / 'horizon.json'}, {args.out / 'roc.png'}, {args.out / 'bank_scores.csv'}")
-    return BenchResult(f"{table}\n\n{sweep_table}\n\n" + "\n\n".join(lines + [kitti_line]))
+    return BenchResult(f"{table}\n\n{sweep_table}\n\n" + "\n\n".join(lines + [kitti_line, real_text]))
 
 
 def _argv_echo(args: argparse.Namespace) -> list[str]:
@@ -351,4 +369,5 @@ def _argv_echo(args: argparse.Namespace) -> list[str]:
     out += [f"--set {o}" for o in args.overrides]
     out += ["--no-sift"] if args.no_sift else []
     out += ["--quick"] if args.quick else []
+    out += ["--real-only"] if args.real_only else []
     return out

@@ -34,6 +34,8 @@ BENCHMARKS: dict[str, Benchmark] = {b.name: b for b in (
               "pose-graph back end: solve times, iSAM2 pass, robustness to injected false loops (tables + JSON)"),
     Benchmark("horizon", "vslam.bench.horizon",
               "1D SURF horizon landmarks vs SIFT: ROC/AUC on a KITTI crop bank, extraction and matching time"),
+    Benchmark("loops", "vslam.bench.loop_regimes",
+              "standalone loop detection across regimes (printed/natural floors, low-rate lanes), both renderers"),
     Benchmark("localize", "vslam.bench.localize",
               "visual-memory localisation: paper tables on real sets, pydbow comparison, repeatability, query time"),
     Benchmark("odometry", "vslam.bench.odometry",

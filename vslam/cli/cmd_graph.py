@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 NAME = "graph"
 HELP = "pose graphs: optimise a g2o / TORO file (robust loops, LM or iSAM2), or summarise one"
@@ -50,5 +51,7 @@ def run_optimize(a: argparse.Namespace) -> int:
 
     res = optimize_graph_file(a.input, a.out, a.preset, solver=a.solver, robust=a.robust, init=a.init, tum=a.tum,
                               labels=a.labels)
+    for w in res.warnings:
+        print(f"vslam graph: warning: {w}", file=sys.stderr)
     print("\n".join(res.lines))
     return 0 if res.finite else 1

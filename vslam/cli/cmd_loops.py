@@ -22,8 +22,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threshold", type=float, help="accept local scores >= this instead of the model threshold")
     p.add_argument("--every", type=int, default=1, help="use every N-th frame as a keyframe (default 1)")
     p.add_argument("--shortlist", type=int, default=5, help="candidates verified per query (default 5)")
-    p.add_argument("--exclude-recent", type=int, default=20,
-                   help="never match the most recent N keyframes (default 20)")
+    p.add_argument("--exclude-recent", type=int, default=0,
+                   help="never match the most recent N keyframes (default 0: time and footprint decide)")
+    p.add_argument("--exclude-seconds", type=float, default=2.0,
+                   help="never match keyframes taken less than S seconds before the query (default 2)")
+    p.add_argument("--odometry", default="auto", metavar="{auto,wheel,vo,none,TUM_FILE}",
+                   help="poses for the footprint exclusion and the motion check of loops: the sequence's wheel "
+                        "odometry, our visual odometry, none, or a TUM trajectory (default auto: wheel if present, "
+                        "else visual odometry for a downward camera)")
+    p.add_argument("--appearance-only", action="store_true",
+                   help="ignore odometry: exclude by time and count only, no motion check")
+    p.add_argument("--gate-chi2", type=float, default=16.27,
+                   help="motion check: Mahalanobis bound on (dx, dy, dtheta) (default 16.27, chi-square 3 dof 99.9%%)")
     p.add_argument("--confirmations", type=int, default=1,
                    help="consecutive keyframes that must agree before a loop is accepted (default 1)")
     p.add_argument("--geometry", choices=["auto", "floor", "general"], default="auto",
@@ -34,13 +44,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(a: argparse.Namespace) -> int:
+    from vslam.app.loop_gate import MotionGateParams
     from vslam.app.loops import detect_sequence_loops  # on use: keeps `vslam --help` fast
 
     bar = Progress(0, "loops", enabled=None if not a.quiet else False)
     res = detect_sequence_loops(a.sequence, a.out, mode=a.mode, model=a.model, threshold=a.threshold, every=a.every,
                                 shortlist=a.shortlist, exclude_recent=a.exclude_recent,
                                 confirmations=a.confirmations, geometry=a.geometry, camera=a.camera, fps=a.fps,
-                                progress=bar.update)
+                                progress=bar.update, exclude_seconds=a.exclude_seconds, odometry=a.odometry,
+                                appearance_only=a.appearance_only, gate=MotionGateParams(chi2=a.gate_chi2))
     bar.close()
     for w in res.warnings[:5]:
         print(f"vslam loops: warning: skipped unreadable frame: {w}", file=sys.stderr)

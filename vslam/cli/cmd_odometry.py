@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 import argparse
-import sys
+
+from vslam.cli.progress import Progress
 
 NAME = "odometry"
 HELP = "downward-camera visual odometry: writes trajectory_vo.txt (TUM) and odometry.csv"
@@ -25,19 +26,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true")
 
 
-def _frame_counter(done: int, total: int) -> None:
-    """About 20 updates of "frame i/n" on stderr."""
-    if (done - 1) % max(1, total // 20) == 0 or done == total:
-        print(f"\rframe {done}/{total}", end="", file=sys.stderr, flush=True)
-
-
 def run(args: argparse.Namespace) -> int:
     from vslam.app.odometry import parse_overrides, run_odometry  # on use: keeps `vslam --help` fast
 
+    bar = Progress(0, label="vslam odometry", enabled=None if not args.quiet else False)
     res = run_odometry(args.sequence, args.out, camera=args.camera, preset=args.preset,
                        fusion_preset=args.fusion_preset, overrides=parse_overrides(args.set),
-                       fallback=not args.no_fallback, progress=None if args.quiet else _frame_counter)
-    if not args.quiet:
-        print(file=sys.stderr)
+                       fallback=not args.no_fallback, progress=bar.update)
+    bar.close()
     print(res.summary())
     return 0

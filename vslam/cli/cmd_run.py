@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import argparse
+import json
+import math
 from dataclasses import replace
 
 from vslam.cli.progress import Progress
@@ -28,6 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-frames", type=int, help="process only the first N frames")
     p.add_argument("--print-config", action="store_true", help="print the effective configuration as YAML and exit")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.add_argument("--json", action="store_true",
+                   help="print the run summary as one JSON object on stdout (metrics.json's content plus the output "
+                        "directory); progress still goes to stderr")
 
 
 def build_config(a: argparse.Namespace):
@@ -61,6 +66,20 @@ def run(a: argparse.Namespace) -> int:
     bar = Progress(0, label="vslam run", enabled=None if not a.quiet else False)
     summary = run_sequence(a.sequence, a.out, cfg, camera=a.camera, max_frames=a.max_frames, progress=bar.update)
     bar.close()
-    if not a.quiet:
+    if a.json:   # one object, nothing else on stdout: `vslam run ... --json | jq .summary`
+        doc = {"out": str(summary.out), **json.loads((summary.out / "metrics.json").read_text())}
+        print(json.dumps(_strict(doc), allow_nan=False))
+    elif not a.quiet:
         print(summary.format())
     return 0
+
+
+def _strict(v):
+    """Strict JSON (what jq and other parsers accept): NaN and infinities, e.g. an undefined recall, become null."""
+    if isinstance(v, dict):
+        return {k: _strict(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_strict(x) for x in v]
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v

@@ -1,5 +1,5 @@
-"""PNG plots: a run's trajectories with loop edges, error over time and loop score matrix; ROC and
-precision-recall curves of place recognition. Every plot is written atomically."""
+"""PNG plots: a run's trajectories with loop edges and error over time with loops marked (the loop-score matrix:
+vslam.evaluation.plots_loops); ROC and precision-recall curves of place recognition. Written atomically."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,6 +7,18 @@ from pathlib import Path
 import numpy as np
 
 from odometry.shared.atomic_io import atomic_path
+from odometry.shared.poses import between
+
+
+def start_anchored(poses: np.ndarray) -> np.ndarray:
+    """Planar poses (N, 3) expressed in the frame of the first valid one: where a run's estimate starts (at the
+    origin). Ground truth in its own world frame (render_floor, KITTI, TUM) is then drawn over the estimate instead of
+    beside it; rows with NaN stay NaN."""
+    p = np.asarray(poses, dtype=float)
+    ok = np.flatnonzero(np.all(np.isfinite(p[:, :3]), axis=1)) if len(p) else []
+    if len(ok) == 0:
+        return p.copy()
+    return between(p[ok[0], :3], p[:, :3])
 
 
 def pyplot():
@@ -21,10 +33,16 @@ def pyplot():
     return plt
 
 
+LOOP_STYLES = {"accepted": ("tab:green", "loop kept by the back end"),
+               "outlier": ("tab:red", "loop rejected by the back end"),
+               "rejected": ("0.6", "verified candidate, below threshold")}
+
+
 def plot_trajectories(path: str | Path, trajectories: dict[str, np.ndarray], loops=None, loop_positions=None,
                       title: str = "") -> None:
     """Top-down view of planar trajectories {name: (N, 2+)}; loop edges drawn between `loop_positions`
-    {'accepted': [(p, q)], 'rejected': [...], 'outlier': [...]}."""
+    {'accepted': [(p, q)], 'outlier': [...], 'rejected': [...]}, each with a dot at both ends, since a loop joins
+    two visits of one place and its segment is often shorter than the line width."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
     styles = {"ground truth": dict(color="0.3", lw=2.0, ls="--"), "VO": dict(color="tab:orange", lw=1.2),
@@ -34,53 +52,45 @@ def plot_trajectories(path: str | Path, trajectories: dict[str, np.ndarray], loo
             continue
         ax.plot(p[:, 0], p[:, 1], label=name, **styles.get(name, {}))
         ax.plot(p[0, 0], p[0, 1], "o", color=styles.get(name, {}).get("color", "k"), ms=4)
-    colours = {"accepted": ("tab:green", "loop (kept)"), "outlier": ("tab:red", "loop (rejected by back end)"),
-               "rejected": ("0.7", "candidate below threshold")}
     for kind, segs in (loop_positions or {}).items():
-        c, lab = colours.get(kind, ("k", kind))
-        for k, (a, b) in enumerate(segs):
-            ax.plot([a[0], b[0]], [a[1], b[1]], color=c, lw=0.8, alpha=0.8, label=lab if k == 0 else None)
+        if not len(segs):
+            continue
+        c, lab = LOOP_STYLES.get(kind, ("k", kind))
+        for a, b in segs:
+            ax.plot([a[0], b[0]], [a[1], b[1]], color=c, lw=1.2, alpha=0.9, zorder=3)
+        ends = np.array([[a[0], a[1]] for a, _ in segs] + [[b[0], b[1]] for _, b in segs])
+        ax.scatter(ends[:, 0], ends[:, 1], s=28, facecolors=c, edgecolors="black", linewidths=0.6, zorder=4,
+                   label=f"{lab} ({len(segs)})")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
-    ax.set_title(title)
+    ax.set_title(title or "trajectories (top view) and loop closures", fontsize=10)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, bbox_inches="tight")
     plt.close(fig)
 
 
-def plot_errors(path: str | Path, series: dict[str, tuple[np.ndarray, np.ndarray]], ylabel: str = "APE (m)") -> None:
+def plot_errors(path: str | Path, series: dict[str, tuple[np.ndarray, np.ndarray]], ylabel: str = "APE (m)",
+                loop_times: dict[str, np.ndarray] | None = None, title: str = "") -> None:
+    """Error over time {name: (t (s), error)}; loop closures {kind: times (s)} (kinds as in LOOP_STYLES) marked as
+    vertical lines at the query frame's time."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(8, 3.5), dpi=110)
+    fig, ax = plt.subplots(figsize=(8, 3.8), dpi=110)
+    colours = {"VO": "tab:orange", "SLAM": "tab:blue"}
     for name, (t, e) in series.items():
-        ax.plot(t, e, label=name, lw=1.0)
+        ax.plot(t, e, label=name, lw=1.1, color=colours.get(name))
+    for kind, times in (loop_times or {}).items():
+        c, lab = LOOP_STYLES.get(kind, ("k", kind))
+        for k, t in enumerate(np.asarray(times, float)):
+            ax.axvline(t, color=c, lw=1.4, ls="--", label=f"{lab} ({len(times)})" if k == 0 else None)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(ylabel)
+    ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, bbox_inches="tight")
-    plt.close(fig)
-
-
-def plot_score_matrix(path: str | Path, query: np.ndarray, match: np.ndarray, score: np.ndarray, n: int,
-                      title: str = "local score", max_size: int = 600) -> None:
-    """Score of query i against match j as an image (like seed 001 Fig. 2), frames binned to at most max_size."""
-    plt = pyplot()
-    n = max(int(n), 1)
-    b = max(1, int(np.ceil(n / max_size)))
-    m = np.full((n // b + 1, n // b + 1), np.nan)
-    for qi, mj, s in zip(query, match, score):
-        i, j = int(qi) // b, int(mj) // b
-        if np.isnan(m[i, j]) or s > m[i, j]:
-            m[i, j] = s
-    fig, ax = plt.subplots(figsize=(6, 5.2), dpi=110)
-    im = ax.imshow(m, origin="upper", cmap="viridis", interpolation="nearest")
-    fig.colorbar(im, ax=ax, label=title)
-    ax.set_xlabel(f"match frame (/{b})" if b > 1 else "match frame")
-    ax.set_ylabel(f"query frame (/{b})" if b > 1 else "query frame")
+    ax.legend(fontsize=8, loc="upper left")
+    ax.set_title(title or "position error over time", fontsize=10)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, bbox_inches="tight")
     plt.close(fig)

@@ -14,6 +14,7 @@ from vslam.errors import VslamError
 from vslam.evaluation import plots
 from vslam.evaluation.loops import LoopTable, loop_precision_recall, read_loops_csv
 from vslam.evaluation.metrics import Alignment, DeltaUnit, align, associate, evaluate, start_to_end_error
+from vslam.evaluation.plots_loops import loop_status, plot_loop_matrix, similarity_matrix
 from vslam.io import open_sequence
 from vslam.sequence import Trajectory
 
@@ -85,8 +86,7 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
                                 title=f"aligned ({Alignment(alignment).value})")
         plots.plot_errors(pdir / "error_over_time.png", series)
         if loops is not None and len(loops):
-            n = int(max(loops.query.max(), loops.match.max())) + 1
-            plots.plot_score_matrix(pdir / "loop_scores.png", loops.query, loops.match, loops.local_score, n)
+            _loop_matrix(pdir / "loop_scores.png", loops, run_info.get("keyframes"))
     atomic_write_text(out / "eval.json", json.dumps(report, indent=2, default=float) + "\n")
     return report
 
@@ -115,6 +115,20 @@ def evaluate_result(result, seq) -> dict:
         out["loops"] = {"accepted": loop_precision_recall(result.camera, gt_frames, table, **kw),
                         "kept_by_back_end": loop_precision_recall(result.camera, gt_frames, table, use_inliers=True, **kw)}
     return out
+
+
+def _loop_matrix(path: Path, loops, keyframes) -> None:
+    """loops.csv's candidates on the query x match keyframe grid, coloured by local score (the run's full
+    similarity matrix is only in the plot `vslam run` writes)."""
+    frames = np.union1d(np.asarray(keyframes if keyframes else [], int),
+                        np.union1d(loops.query.astype(int), loops.match.astype(int)))
+    judged = loops.inlier is not None
+    inl = loops.inlier if judged else [None] * len(loops)
+    matrix = similarity_matrix(frames, [(q, [m], [s]) for q, m, s in zip(loops.query, loops.match, loops.local_score)])
+    marks = [(q, m, loop_status(bool(a), i, judged)) for q, m, a, i in zip(loops.query, loops.match, loops.accepted,
+                                                                            inl)]
+    plot_loop_matrix(path, frames, matrix, marks, score_label="local score of the verified candidates",
+                     title="loop candidates: local score on the query x match keyframe grid")
 
 
 def _loop_segments(out: Path, loops) -> dict:

@@ -11,6 +11,7 @@ from odometry.shared.atomic_io import atomic_write_text
 from odometry.shared.tum import write_tum
 from vslam.evaluation import plots
 from vslam.evaluation.loops import RUN_LOOPS_HEADER
+from vslam.evaluation.plots_loops import loop_status, plot_loop_matrix, similarity_matrix
 from vslam.evaluation.run_eval import evaluate_result
 
 
@@ -67,21 +68,26 @@ def _plots(result, out: Path, seq) -> None:
     pdir.mkdir(exist_ok=True)
     trajs = {}
     if seq is not None and seq.groundtruth is not None:
-        trajs["ground truth"] = seq.groundtruth_planar()[: len(result.timestamps)]
+        trajs["ground truth"] = plots.start_anchored(seq.groundtruth_planar()[: len(result.timestamps)])
     trajs["VO"] = result.poses_vo
     trajs["SLAM"] = result.poses_slam
     p = result.poses_slam
     segs = {"accepted": [(p[l.query_frame], p[l.match_frame]) for l in result.loops if l.accepted and l.inlier],
             "outlier": [(p[l.query_frame], p[l.match_frame]) for l in result.loops if l.accepted and not l.inlier]}
-    plots.plot_trajectories(pdir / "trajectories.png", trajs, loop_positions=segs, title=result.sequence)
-    if result.loops:
-        q = np.array([l.query_frame for l in result.loops])
-        m = np.array([l.match_frame for l in result.loops])
-        s = np.array([l.local_score for l in result.loops])
-        plots.plot_score_matrix(pdir / "loop_scores.png", q, m, s, len(result.timestamps))
+    plots.plot_trajectories(pdir / "trajectories.png", trajs, loop_positions=segs,
+                            title=f"{result.sequence}: trajectories (top view) and loop closures")
+    marks = [(l.query_frame, l.match_frame, loop_status(l.accepted, l.inlier)) for l in result.loops]
+    if len(result.keyframes) > 1:
+        matrix = similarity_matrix(result.keyframes, result.similarity) if result.similarity else None
+        plot_loop_matrix(pdir / "loop_scores.png", result.keyframes, matrix, marks,
+                         title=f"{result.sequence}: retrieval similarity of each query keyframe to the stored ones")
     if seq is not None and seq.groundtruth is not None:
-        gt = seq.groundtruth_planar()[: len(result.timestamps)]
+        gt = plots.start_anchored(seq.groundtruth_planar()[: len(result.timestamps)])
         ok = ~np.isnan(gt[:, 0])
-        series = {name: (result.timestamps[ok] - result.timestamps[0], np.linalg.norm(pp[ok, :2] - gt[ok, :2], axis=1))
+        t = result.timestamps - result.timestamps[0]
+        series = {name: (t[ok], np.linalg.norm(pp[ok, :2] - gt[ok, :2], axis=1))
                   for name, pp in (("VO", result.poses_vo), ("SLAM", result.poses_slam))}
-        plots.plot_errors(pdir / "error_over_time.png", series, ylabel="position error, unaligned (m)")
+        times = {"accepted": [t[l.query_frame] for l in result.loops if l.accepted and l.inlier],
+                 "outlier": [t[l.query_frame] for l in result.loops if l.accepted and not l.inlier]}
+        plots.plot_errors(pdir / "error_over_time.png", series, ylabel="position error, from a common start (m)",
+                          loop_times=times, title=f"{result.sequence}: position error against ground truth")

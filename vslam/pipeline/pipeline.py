@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -77,6 +77,7 @@ class PipelineResult:
     descriptor_bytes: np.ndarray      # per keyframe
     wall_seconds: float = 0.0
     sequence: str = ""
+    similarity: list = field(default_factory=list)   # per keyframe: (frame, stored frames, retrieval scores)
 
     @property
     def accepted_loops(self) -> list[LoopRecord]:
@@ -119,7 +120,7 @@ class Pipeline:
         cfg = self.config
         self.camera = camera
         self.vo = VisualOdometry(camera, cfg.vo)
-        self.loop_detector = build_loop_detector(cfg)
+        self.loop_detector = build_loop_detector(cfg, camera)
         self.graph = IncrementalBuilder(cfg.graph) if cfg.incremental else PoseGraphBuilder(cfg.graph)
         self.rng = np.random.default_rng(cfg.seed)
         self.timestamps: list[float] = []
@@ -131,6 +132,7 @@ class Pipeline:
         self.loops: list[LoopRecord] = []
         self.graph_loops: list[LoopRecord] = []
         self.descriptor_bytes: list[int] = []
+        self.similarity: list[tuple] = []
         self.timings: dict[str, list[float]] = {k: [] for k in ("decode", "vo", "loops", "graph", "record", "frame")}
         self._acc_delta = np.zeros(3)            # VO motion since the last keyframe and its covariance
         self._acc_cov = np.zeros((3, 3))
@@ -138,6 +140,7 @@ class Pipeline:
         self._new_loops = 0
         self._last_image = None
         self.last_result = None
+        self._graph_moved = False
 
     # ------------------------------------------------------------------ per frame
     def _is_keyframe(self, index: int) -> bool:
@@ -224,8 +227,13 @@ class Pipeline:
         detector = self.loop_detector
         obs = detector.recognizer.observe(image)   # cdvs: the decoded compact bytes, as a robot would store them
         self.descriptor_bytes.append(int(obs.nbytes))
-        cands = detector.query(obs, key=index)
-        detector.add(index, obs)
+        # similarity to every stored keyframe (recent ones too): the loop-score matrix plot's rows
+        ranked = detector.recognizer.query(obs)
+        self.similarity.append((index, np.array([int(r.key) for r in ranked], int),
+                                np.array([float(r.score) for r in ranked])))
+        stamp = float(self.timestamps[index])
+        cands = detector.query(obs, key=index, stamp=stamp)
+        detector.add(index, obs, stamp, self.poses_vo[index])   # footprint exclusion follows the VO poses
         out = []
         for c in cands:
             v = c.verification
@@ -268,6 +276,7 @@ class Pipeline:
             for rec in self.graph_loops:
                 rec.inlier = bool(inl[rec.loop_index])
             self._new_loops = 0
+            self._graph_moved = True
             return
         every = self.config.optimize_every
         if every <= 0 or self._new_loops < every:
@@ -278,6 +287,7 @@ class Pipeline:
 
     def _apply(self, res) -> None:
         self.last_result = res
+        self._graph_moved = True      # the recording redraws the SLAM trajectory and loops at this frame
         self.kf_slam = [p.copy() for p in res.poses]
         for rec in self.graph_loops:
             rec.inlier = bool(res.loop_inlier[rec.loop_index])
@@ -304,7 +314,8 @@ class Pipeline:
                               poses_vo=np.asarray(self.poses_vo).reshape(-1, 3), poses_slam=slam,
                               keyframes=np.asarray(self.keyframes, int), loops=self.loops, graph=self.graph.data(),
                               graph_result=self.last_result, timings=timings, vo_status=np.asarray(self.vo_status),
-                              vo_inliers=np.asarray(self.vo_inliers), descriptor_bytes=np.asarray(self.descriptor_bytes))
+                              vo_inliers=np.asarray(self.vo_inliers), descriptor_bytes=np.asarray(self.descriptor_bytes),
+                              similarity=self.similarity)
 
     # ------------------------------------------------------------------ whole sequences
     def run(self, seq, progress: Callable[[int, int], None] | None = None, max_frames: int | None = None
@@ -365,16 +376,32 @@ class Pipeline:
             vals.update({"loops/local_score": best.local_score, "loops/global_score": best.global_score,
                          "loops/probability": best.probability})
         r.log_scalars(**vals)
+        moved, self._graph_moved = self._graph_moved, False
+        if moved:   # the optimiser moved the poses: redraw what depends on them (this frame's loops included)
+            r.replace_trajectory("slam", np.array([self.slam_pose(i) for i in range(index + 1)]))
+            self._record_loops(lambda i: self.slam_pose(i), self.loops)
         for l in found:
-            if l.accepted:   # candidates below threshold show in the score time series, not as edges
-                r.log_loop(self.slam_pose(l.query_frame), self.slam_pose(l.match_frame), True)
+            if l.accepted:   # candidates below threshold show in the score time series (and at the end, hidden)
+                if not moved:
+                    r.log_loop(self.slam_pose(l.query_frame), self.slam_pose(l.match_frame), True)
                 r.log_text(f"loop {l.query_frame} -> {l.match_frame}: local score {l.local_score:.1f}, "
                            f"P = {l.probability:.2f}, {l.pose_inliers} pose inliers")
         if est.status not in (VOStatus.OK, VOStatus.INIT):
             r.log_text(f"frame {index}: VO {est.status.value} ({est.reason})", "WARN")
 
     def _record_final_loops(self, result: PipelineResult) -> None:
-        p = result.poses_slam
-        acc = [(p[l.query_frame], p[l.match_frame]) for l in result.loops if l.accepted and l.inlier]
-        rej = [(p[l.query_frame], p[l.match_frame]) for l in result.loops if not (l.accepted and l.inlier)]
-        self.recorder.set_loops([np.array(a)[:, :2] for a in acc], [np.array(r)[:, :2] for r in rej])
+        self._record_loops(lambda i: result.poses_slam[i], result.loops, candidates=True)
+
+    def _record_loops(self, pose, loops: list[LoopRecord], candidates: bool = False) -> None:
+        """Loops accepted by the detector, kept / rejected by the back end (during the run a loop not yet judged
+        counts as kept; at the end one the back end never saw counts as rejected); verified candidates below the
+        detector's threshold only with `candidates` (at the end: drawn once, in an entity hidden by default)."""
+        def seg(l):
+            return np.array([pose(l.query_frame)[:2], pose(l.match_frame)[:2]])
+
+        def kept(l):
+            return bool(l.inlier) if candidates else l.inlier is not False
+
+        acc = [l for l in loops if l.accepted]
+        self.recorder.set_loops([seg(l) for l in acc if kept(l)], [seg(l) for l in acc if not kept(l)],
+                                [seg(l) for l in loops if not l.accepted] if candidates else None)

@@ -14,6 +14,7 @@ from loops.geometry import GeometryModel
 from loops.loop_detector import LoopDetector
 from loops.vocab.floor_vocabulary import load_floor_vocabulary
 from loops.vocab.recognizer import VerifyParams, VocabRecognizer, VocabVerifier
+from odometry.shared.camera import CameraModel
 from vslam.pipeline.config import PipelineConfig
 
 # a downward camera at a fixed height sees the floor at one scale: a verified transform must keep it
@@ -29,26 +30,28 @@ def default_loop_model() -> LoopModel | None:
         return None
 
 
-def cdvs_detector(config: PipelineConfig) -> LoopDetector:
+def cdvs_detector(config: PipelineConfig, camera: CameraModel | None = None) -> LoopDetector:
     lc = config.loops
     model = LoopModel.load(lc.model) if lc.model else default_loop_model()
     params = CdvsParams.floor(lc.mode) if lc.floor_preset else CdvsParams.for_mode(lc.mode)
-    return cdvs_loop_detector(lc.mode, params, config.database_params(), model=model)
+    return cdvs_loop_detector(lc.mode, params, config.database_params(), model=model, camera=camera)
 
 
-def vocab_detector(config: PipelineConfig) -> LoopDetector:
+def vocab_detector(config: PipelineConfig, camera: CameraModel | None = None) -> LoopDetector:
     vc = config.loops.vocab
     tree, params = load_floor_vocabulary(vc.vocabulary)
     params = dataclasses.replace(params, n_features=vc.n_features, min_shared_words=vc.min_shared_words)
     verify = VerifyParams(ratio=vc.ratio, min_inliers=vc.min_inliers, threshold_px=vc.threshold_px,
                           geometry=GeometryModel.SIMILARITY, scale_range=FLOOR_SCALE_RANGE)
-    return LoopDetector(VocabRecognizer(tree, params), VocabVerifier(verify), config.database_params())
+    return LoopDetector(VocabRecognizer(tree, params), VocabVerifier(verify), config.database_params(), camera=camera)
 
 
-def build_loop_detector(config: PipelineConfig) -> LoopDetector | None:
-    """The configured loop detector (None when loop detection is disabled)."""
+def build_loop_detector(config: PipelineConfig, camera: CameraModel | None = None) -> LoopDetector | None:
+    """The configured loop detector (None when loop detection is disabled). With the downward `camera`, keyframes
+    added with their VO pose become candidates only once the camera has left their footprint (on top of the
+    configured exclusion; loops.loop_detector)."""
     if not config.loops.enabled:
         return None
     if config.loops.recognizer == "vocab":
-        return vocab_detector(config)
-    return cdvs_detector(config)
+        return vocab_detector(config, camera)
+    return cdvs_detector(config, camera)
