@@ -26,6 +26,8 @@ class Benchmark:
 
 
 BENCHMARKS: dict[str, Benchmark] = {b.name: b for b in (
+    Benchmark("batch", "vslam.bench.batch",
+              "`vslam batch` throughput: sequential vs local process pool vs local Dask cluster on simulated sequences"),
     Benchmark("descriptors", "vslam.bench.descriptors",
               "compact descriptors (modes 1-6) vs OpenCV SIFT: size, speed, query scaling, loop P/R, 48 real pairs"),
     Benchmark("fuzz", "vslam.bench.fuzz",
