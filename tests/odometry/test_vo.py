@@ -209,6 +209,7 @@ def test_previous_frame_is_matched_when_the_keyframe_cannot_be(tex):
         assert vo.process(r.render(poses[i]), i / FPS).status in (VOStatus.INIT, VOStatus.OK)
     noise = np.random.default_rng(0).integers(0, 256, (480, 640), dtype=np.uint8)
     vo._kf.gray = type(vo._kf.gray)(noise, noise)  # an unmatchable template
+    vo._kf.orb = None                              # (and its descriptors, computed from the template again)
     est = vo.process(r.render(poses[6]), 6 / FPS)
     assert est.status == VOStatus.OK and est.reference == Reference.PREVIOUS and est.is_keyframe
     assert np.hypot(*_err(est.delta, between(poses[5], poses[6]))[:2]) < 3e-4
