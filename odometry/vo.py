@@ -169,9 +169,11 @@ class VOConfig(Config):
     orb_min_inlier_ratio: float = setting(0.1, range="[0, 1]",
                                           doc="of the ratio-test survivors (many lie outside the overlap)")
     orb_hypotheses: int = setting(3, range="[1, inf)", doc="RANSAC consensus sets tried in turn until LK confirms one")
-    orb_strong_inliers: int = setting(60, range="[3, inf)",
+    # render_floor's mosaic holds rotated copies of the same photographs: 67 ORB inliers at a wrong place were
+    # seen, so an unconfirmed ORB motion must be far stronger than that
+    orb_strong_inliers: int = setting(150, range="[3, inf)",
                                       doc="an ORB fit with this many inliers (and orb_strong_ratio) needs no LK")
-    orb_strong_ratio: float = setting(0.3, range="[0, 1]")
+    orb_strong_ratio: float = setting(0.5, range="[0, 1]")
     prediction_gate: float = setting(6.0, range="(0, inf)", unit="sigma",
                                      doc="a descriptor motion this far from the given fallback motion is rejected")
     reacquire_keyframes: int = setting(6, range="[0, inf)",
@@ -506,10 +508,11 @@ class VisualOdometry:
         return orb_features(images.coarse, c.orb_features, c.orb_fast_threshold, c.border)
 
     def _descriptor_match(self, kf: _Keyframe, gray: _Images, t_pred: np.ndarray | None,
-                          gate: tuple[np.ndarray, np.ndarray] | None):
+                          gate: tuple[np.ndarray, np.ndarray] | None, confirm: bool = False):
         """ORB matches keyframe -> frame, the rigid fit on their floor points, then LK on the keyframe's corners
         started from that motion (sub-pixel). `gate` = (predicted motion, covariance): a fit outside it is
-        rejected (a repeated pattern can match the wrong place)."""
+        rejected (a repeated pattern can match the wrong place). With `confirm`, only LK-confirmed motions count
+        (re-acquisition: the keyframe may be any of several, so a wrong place is likelier)."""
         c = self.config
         none = (_NO_MATCH, Method.NONE)
         if kf.orb is None:
@@ -537,7 +540,8 @@ class VisualOdometry:
                 refined = self._track(kf.gray, kf.pts, kf.xn, kf.floor, gray, fit.delta)
                 if refined[0] is not None:
                     return refined, Method.ORB_LK
-                if fit.n_inliers >= c.orb_strong_inliers and fit.n_inliers >= c.orb_strong_ratio * len(ia):
+                if not confirm and fit.n_inliers >= c.orb_strong_inliers \
+                        and fit.n_inliers >= c.orb_strong_ratio * len(ia):
                     return (fit, ref_px[left], cur_px[left], fit.inliers), Method.ORB
             left = left[~fit.inliers]
         return none
@@ -635,7 +639,7 @@ class VisualOdometry:
             if self._gate is not None:
                 gate = (compose(t_jp, self._gate[0]), c_jp + self._gate[1])
             (fit, ref_px, cur_px, inl), method = self._descriptor_match(kf, gray, None if gate is None else gate[0],
-                                                                        gate)
+                                                                        gate, confirm=True)
             if fit is None:
                 continue
             delta, cov = between_with_covariance(t_jp, c_jp, fit.delta, fit.covariance)

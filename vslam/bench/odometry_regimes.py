@@ -39,7 +39,6 @@ from vslam.io import open_sequence
 from vslam.sim import Effects, SimConfig, simulate
 
 
-
 def shared_dir() -> Path:
     """../shared beside the repository, or the parent of $VSLAM_SHARED_DATA (the shared data folder)."""
     data = os.environ.get("VSLAM_SHARED_DATA")
@@ -48,9 +47,10 @@ def shared_dir() -> Path:
 TEXTURES = ("skimage_cc0/gravel.png", "gazebo_models_ccby3/cloverleaf_interchange__concrete.png",
             "gazebo_models_ccby3/cloverleaf_interchange__grass.png", "aws_robomaker_mit0/racetrack_Ground_01_grass_dirt.png",
             "skimage_cc0/grass.png", "gazebo_models_ccby3/vrc_driving_terrain__grass_dry.png")
-# tuning half (looked at while developing the descriptor path): render_floor textures 0+1 seed 1, every 22nd
-# frame, and our aerial lanes over grass seed 11. Everything else below is the reporting half.
-TUNING = {"render_floor gravel+concrete s1 1/22", "ours lanes grass h40 s11"}
+# tuning half (looked at while developing the descriptor path; a wrong ORB-only re-acquisition on seed 2 led to
+# LK confirmation): render_floor seeds 1-3 and our aerial lanes over grass seed 11. The rest is the reporting half.
+TUNING = {"render_floor gravel+concrete s1 1/22", "ours lanes grass h40 s11", "render_floor lawn+grass-dirt s2 1/22",
+          "render_floor grass+dry-grass s3 1/38"}
 
 
 @dataclass(frozen=True)
@@ -113,7 +113,10 @@ def regimes() -> list[Regime]:
     r = []
     for name, (tex, seed, step) in {"render_floor gravel+concrete s1 1/22": ((0, 1), 1, 22),
                                     "render_floor lawn+grass-dirt s2 1/22": ((2, 3), 2, 22),
-                                    "render_floor grass+dry-grass s3 1/38": ((4, 5), 3, 38)}.items():
+                                    "render_floor grass+dry-grass s3 1/38": ((4, 5), 3, 38),
+                                    "render_floor lawn+grass-dirt s6 1/22": ((2, 3), 6, 22),
+                                    "render_floor gravel+concrete s7 1/22": ((0, 1), 7, 22),
+                                    "render_floor grass+dry-grass s8 1/38": ((4, 5), 8, 38)}.items():
         r.append(Regime(name, "render_floor", _render_floor(tex, seed, step, name), low_rate=True))
     for name, cfg in {"ours lanes grass h40 s11": _lanes("grass", 40.0, 0.2, 0.35, 11),
                       "ours lanes asphalt h40 s12": _lanes("asphalt", 40.0, 0.2, 0.35, 12),
