@@ -30,11 +30,30 @@ class Features:
         return len(self.pts)
 
 
-def orb_features(gray: np.ndarray, n_features: int, fast_threshold: int, border: int = 16) -> Features:
-    """ORB keypoints and descriptors of a grey uint8 image (at most `n_features`, FAST threshold in grey levels)."""
-    orb = cv2.ORB_create(nfeatures=int(n_features), scaleFactor=1.2, nlevels=8, edgeThreshold=max(border, 16),
-                         fastThreshold=int(fast_threshold))
-    kps, desc = orb.detectAndCompute(gray, None)
+def orb_features(gray: np.ndarray, n_features: int, fast_threshold: int, border: int = 16,
+                 grid: tuple[int, int] = (8, 6), oversample: int = 3) -> Features:
+    """ORB keypoints and descriptors of a grey uint8 image: `oversample` x `n_features` candidates (FAST threshold
+    in grey levels), of which the strongest of each `grid` cell are kept, `n_features` in all.
+
+    Why the grid: ORB keeps the globally strongest corners, which gather on the most contrasted part of the view;
+    when two frames overlap by 40 % (a low frame rate), the overlap may then hold almost none (measured on a grass
+    floor: 1 correct match among 1000 keypoints, 25 among 3000)."""
+    orb = cv2.ORB_create(nfeatures=int(n_features) * max(1, oversample), scaleFactor=1.2, nlevels=8,
+                         edgeThreshold=max(border, 16), fastThreshold=int(fast_threshold))
+    kps = orb.detect(gray, None)
+    if len(kps) > n_features:
+        h, w = gray.shape[:2]
+        gx, gy = grid
+        cell = np.array([min(int(k.pt[1] * gy / h), gy - 1) * gx + min(int(k.pt[0] * gx / w), gx - 1) for k in kps])
+        resp = np.array([k.response for k in kps])
+        order = np.lexsort((-resp, cell))                       # by cell, strongest first
+        sc = cell[order]
+        rank = np.arange(len(sc)) - np.searchsorted(sc, sc, side="left")
+        per_cell = int(np.ceil(n_features / (gx * gy)))
+        keep = order[rank < per_cell]
+        keep = keep[np.argsort(-resp[keep], kind="stable")][:n_features]
+        kps = [kps[i] for i in sorted(keep)]
+    kps, desc = orb.compute(gray, kps)
     if desc is None or not kps:
         return Features(np.zeros((0, 2)), np.zeros((0, 32), np.uint8))
     return Features(np.array([k.pt for k in kps], dtype=np.float64), desc)

@@ -160,8 +160,8 @@ class VOConfig(Config):
     lk_max_rotation: float = setting(0.35, range="[0, inf)", unit="rad",
                                      doc="predicted rotation since the keyframe above which LK runs derotated")
     descriptors: bool = setting(True, doc="ORB matching when LK fails, to initialise and to re-acquire")
-    orb_features: int = setting(1000, range="[10, inf)", doc="ORB keypoints per frame on the descriptor path")
-    orb_fast_threshold: int = setting(12, range="[1, 255]", unit="grey levels", doc="FAST threshold of ORB")
+    orb_features: int = setting(1500, range="[10, inf)", doc="ORB keypoints per frame on the descriptor path")
+    orb_fast_threshold: int = setting(8, range="[1, 255]", unit="grey levels", doc="FAST threshold of ORB")
     orb_ratio: float = setting(0.8, range="(0, 1]", doc="Lowe's ratio test on Hamming distances")
     orb_threshold_px: float = setting(3.0, range="(0, inf)", unit="px",
                                       doc="RANSAC inlier distance for ORB matches (ORB keypoints are ~0.6 px RMS)")
@@ -174,6 +174,11 @@ class VOConfig(Config):
     orb_strong_inliers: int = setting(150, range="[3, inf)",
                                       doc="an ORB fit with this many inliers (and orb_strong_ratio) needs no LK")
     orb_strong_ratio: float = setting(0.5, range="[0, 1]")
+    # LK confirms a place when it tracks a good share of the corners that place puts in view: a repeated copy of a
+    # texture patch covers only part of the view. Re-acquisition (any of several keyframes) asks for more.
+    orb_confirm_fraction: float = setting(0.3, range="[0, 1]",
+                                          doc="LK inliers / keyframe corners in view to confirm an ORB motion")
+    reacquire_min_fraction: float = setting(0.5, range="[0, 1]", doc="the same when re-acquiring")
     prediction_gate: float = setting(6.0, range="(0, inf)", unit="sigma",
                                      doc="a descriptor motion this far from the given fallback motion is rejected")
     reacquire_keyframes: int = setting(6, range="[0, inf)",
@@ -538,13 +543,20 @@ class VisualOdometry:
                 break
             if gate is None or t_pred is None or self._in_gate(fit, t_pred, gate[1]):
                 refined = self._track(kf.gray, kf.pts, kf.xn, kf.floor, gray, fit.delta)
-                if refined[0] is not None:
+                need = c.reacquire_min_fraction if confirm else c.orb_confirm_fraction
+                if refined[0] is not None and refined[0].n_inliers >= need * self._visible(kf, fit.delta):
                     return refined, Method.ORB_LK
                 if not confirm and fit.n_inliers >= c.orb_strong_inliers \
                         and fit.n_inliers >= c.orb_strong_ratio * len(ia):
                     return (fit, ref_px[left], cur_px[left], fit.inliers), Method.ORB
             left = left[~fit.inliers]
         return none
+
+    def _visible(self, kf: _Keyframe, t_kc: np.ndarray) -> int:
+        """How many of the keyframe's corners the motion t_kc puts inside the current image."""
+        px = self.camera.floor_to_pixel((kf.floor - t_kc[:2]) @ _rot(t_kc[2]))
+        w, h = self.camera.size
+        return int(((px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)).sum())
 
     def _in_gate(self, fit: RigidFit, t_pred: np.ndarray, cov: np.ndarray) -> bool:
         c = self.config
@@ -582,10 +594,12 @@ class VisualOdometry:
         est.keyframe_index, est.keyframe_delta, est.keyframe_covariance = kf.index, fit.delta, c_kc
         self._t_kp, self._c_kp, self._c_kp_fit = fit.delta, c_kc, fit.covariance
         self._prev_px = cur_px[inl]
-        # keep or renew the keyframe; a frame that needed descriptors is far from it: always renew
+        # keep or renew the keyframe
         c = self.config
         n_in = fit.n_inliers
-        renew = (method in (Method.ORB, Method.ORB_LK) or n_in < c.keyframe_min_inliers
+        # a frame that needed a retry or descriptors is far from the keyframe (or the prediction is poor): renew,
+        # so the next frame is matched to a close keyframe (at a low rate the next one would barely overlap)
+        renew = (method != Method.LK or n_in < c.keyframe_min_inliers
                  or n_in < c.keyframe_min_fraction * len(kf.pts) or abs(fit.delta[2]) > c.keyframe_max_rotation)
         if renew and self._start_keyframe(gray, index, timestamp):
             est.is_keyframe = True
@@ -594,9 +608,12 @@ class VisualOdometry:
     def _match_previous(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
         prev_px = self._prev_px
         prev_xn = self.camera.normalize(prev_px)
-        (fit, ref_px, cur_px, _), method = self._measure(self._prev_gray, prev_px, prev_xn,
-                                                         self.camera.rays_to_floor(prev_xn), gray,
-                                                         pred if self._predicted else None)
+        # the previous frame as a keyframe of the keyframe's corners it tracked, so descriptors can match it too
+        prev = _Keyframe(index=index - 1, timestamp=timestamp - dt, gray=self._prev_gray, pts=prev_px, xn=prev_xn,
+                         floor=self.camera.rays_to_floor(prev_xn))
+        gate = None if self._gate is None else (pred, self._gate[1])
+        (fit, ref_px, cur_px, _), method = self._measure(prev.gray, prev.pts, prev.xn, prev.floor, gray,
+                                                         pred if self._predicted else None, keyframe=prev, gate=gate)
         if fit is None:
             return None
         cov = fit.covariance if self.config.refine_tilt else fit.covariance + self._model_covariance(dt, fit.delta)
