@@ -185,6 +185,11 @@ class VOConfig(Config):
                                        doc="recent keyframes a frame is matched against after tracking was lost")
     reanchor_frames: int = setting(100, range="[0, inf)",
                                    doc="frames after a loss during which each frame tries to re-attach to them")
+    # the camera height is not constant (suspension, floor unevenness; a drone's altitude hold): a height error is
+    # a scale error of every motion. The tilt refinement measures each frame's height relative to its keyframe;
+    # chaining those ratios gives it relative to the first frame, and the mean over the run so far is taken to
+    # be the nominal camera_height (the first frame's own height is not known).
+    track_height: bool = setting(True, doc="estimate the camera height frame by frame (needs refine_tilt)")
     seed: int = setting(0, range="[0, inf)")
 
     def check(self) -> None:
@@ -263,6 +268,7 @@ class _Keyframe:
     xn: np.ndarray       # (N, 2) their undistorted normalised coordinates
     floor: np.ndarray    # (N, 2) their floor points in the keyframe's base frame
     orb: Features | None = None  # ORB features, computed when the descriptor path first needs them
+    height: float = 1.0          # camera height at this frame relative to the first frame's (track_height)
 
 
 class VisualOdometry:
@@ -303,6 +309,11 @@ class VisualOdometry:
         self._unanchored_since: int | None = None
         self._frame_orb: Features | None = None   # ORB features of the frame being processed, when computed
         self._gate: tuple[np.ndarray, np.ndarray] | None = None  # fallback motion since the previous frame + cov
+        # camera heights relative to the first frame's: of the previous frame, of the frame being processed, and
+        # their time-weighted mean so far, which is taken to be the nominal camera_height
+        self._height = 1.0
+        self._frame_height = 1.0
+        self._h_mean, self._h_int, self._t_int = 1.0, 0.0, 0.0
 
     # ------------------------------------------------------------------ public state
     @property
@@ -324,6 +335,7 @@ class VisualOdometry:
         index = len(self._poses)
         self._fit_seconds = 0.0
         self._frame_orb = None
+        self._frame_height = self._height
         if self._last_t is not None and not timestamp > self._last_t:
             raise OdometryError(f"frame {index}: timestamp {timestamp!r} does not increase (previous {self._last_t!r})")
         dt = None if self._last_t is None else timestamp - self._last_t
@@ -407,8 +419,9 @@ class VisualOdometry:
                 reason_out.reason = f"too few corners for a keyframe ({len(pts)} < {c.min_features})"
             return False
         xn = self.camera.normalize(pts)
+        h = self._frame_height
         self._kf = _Keyframe(index=index, timestamp=timestamp, gray=gray, pts=pts, xn=xn,
-                             floor=self.camera.rays_to_floor(xn), orb=self._frame_orb)
+                             floor=self._floor(xn, h), orb=self._frame_orb, height=h)
         self._t_kp = np.zeros(3)
         self._c_kp = np.zeros((3, 3))
         self._c_kp_fit = np.zeros((3, 3))
@@ -417,10 +430,26 @@ class VisualOdometry:
             self._bank = (self._bank + [self._kf])[-c.reacquire_keyframes:]
         return True
 
+    def _abs_height(self, rel: float | None) -> float:
+        """Metres of a relative height: the mean relative height so far is the nominal camera_height."""
+        h0 = self.camera.camera_height
+        if rel is None or not self.config.track_height:
+            return h0
+        return h0 * rel / self._h_mean
+
+    def _floor(self, xn: np.ndarray, rel_height: float | None) -> np.ndarray:
+        """Floor points of rays for the camera at a relative height (nominal: `CameraModel.rays_to_floor`)."""
+        h = self._abs_height(rel_height)
+        if h == self.camera.camera_height:
+            return self.camera.rays_to_floor(xn)
+        return self.camera.rays_to_floor_batch(xn, [h], [self.camera.tilt])[0]
+
     def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray, ref_floor: np.ndarray,
              threshold_px: float | None = None, min_inliers: int | None = None,
-             min_ratio: float | None = None) -> RigidFit | None:
-        """RANSAC + Kabsch on floor points (cur -> ref), then the tilt-aware refinement on the inliers."""
+             min_ratio: float | None = None, h_ref: float | None = None) -> RigidFit | None:
+        """RANSAC + Kabsch on floor points (cur -> ref, both at the reference's relative height `h_ref`), then the
+        tilt-aware refinement on the inliers, which also measures the current frame's relative height
+        (`RigidFit.height`, with track_height)."""
         c = self.config
         threshold_px = c.ransac_threshold_px if threshold_px is None else threshold_px
         min_inliers = c.min_inliers if min_inliers is None else min_inliers
@@ -430,10 +459,14 @@ class VisualOdometry:
                               max_iterations=c.ransac_iterations, confidence=c.ransac_confidence,
                               sigma_floor=c.pixel_sigma * self._m_per_px)
         if fit is not None and fit.n_inliers >= min_inliers and fit.inlier_ratio >= min_ratio and c.refine_tilt:
+            h = self._abs_height(h_ref)
             tf = refine_planar_tilt(self.camera, ref_xn[fit.inliers], cur_xn[fit.inliers], fit.delta,
-                                    c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px)
+                                    c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px,
+                                    h_ref=None if h == self.camera.camera_height else h)
             if tf is not None:
                 fit.delta, fit.covariance, fit.rms, fit.sigma = tf.delta, tf.covariance, tf.rms, tf.sigma
+                if c.track_height and h_ref is not None:
+                    fit.height = h_ref * (1.0 + float(tf.params[7]))
         self._fit_seconds += time.perf_counter() - t0
         if fit is None or fit.n_inliers < min_inliers or fit.inlier_ratio < min_ratio:
             return None
@@ -441,8 +474,8 @@ class VisualOdometry:
         return fit
 
     def _track(self, ref_gray: _Images, ref_px: np.ndarray, ref_xn: np.ndarray, ref_floor: np.ndarray,
-               gray: _Images, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None
-               ) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
+               gray: _Images, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None,
+               h_ref: float | None = None) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
         """LK from a reference frame, started at the positions predicted by the motion t_ref_cur (or by a global
         image `shift` when given); then the robust fit. A large predicted rotation is taken out of the current
         frame first (LK windows do not rotate)."""
@@ -479,10 +512,10 @@ class VisualOdometry:
         if len(cur_px) < c.min_inliers:
             return None, ref_px, cur_px, np.zeros(len(cur_px), bool)
         cur_xn = self.camera.normalize(cur_px)
-        fit = self._fit(cur_xn, ref_xn, self.camera.rays_to_floor(cur_xn), ref_floor)
+        fit = self._fit(cur_xn, ref_xn, self._floor(cur_xn, h_ref), ref_floor, h_ref=h_ref)
         return fit, ref_px, cur_px, (fit.inliers if fit is not None else np.zeros(len(cur_px), bool))
 
-    def _measure(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, keyframe=None, gate=None):
+    def _measure(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, keyframe=None, gate=None, h_ref=None):
         """The motion from a reference frame, trying in turn: LK from the prediction (the fast path), LK with a
         deep pyramid from it, ORB matches against the keyframe refined by LK (any rotation, large shifts; only
         for a `keyframe`), LK from a phase-correlation shift, and without a prediction LK from no motion.
@@ -491,20 +524,21 @@ class VisualOdometry:
         deep = max(c.lk_levels, c.retry_levels)
         out, method = _NO_MATCH, Method.NONE
         if t_ref_cur is not None:
-            out, method = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur), Method.LK
+            out, method = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, h_ref=h_ref), Method.LK
             if out[0] is None and deep > c.lk_levels:
                 # a poor prediction (slip, failed frames in between): the same start with a wider capture range
-                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep)
+                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep, h_ref=h_ref)
                 method = Method.LK_PYRAMID
         if out[0] is None and keyframe is not None and c.descriptors:
             out, method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
         if out[0] is None and c.coarse_retry:
             shift, response = coarse_shift(ref_gray.coarse, gray.coarse)
             if response > c.coarse_min_response:
-                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), shift=shift, levels=deep)
+                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), shift=shift, levels=deep,
+                                  h_ref=h_ref)
                 method = Method.LK_SHIFT
         if out[0] is None and t_ref_cur is None:
-            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), levels=deep)
+            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), levels=deep, h_ref=h_ref)
             method = Method.LK_PYRAMID
         return out, (method if out[0] is not None else Method.NONE)
 
@@ -529,7 +563,7 @@ class VisualOdometry:
             return none
         ref_px, cur_px = kf.orb.pts[ia], self._frame_orb.pts[ib]
         ref_xn, cur_xn = self.camera.normalize(ref_px), self.camera.normalize(cur_px)
-        ref_fl, cur_fl = self.camera.rays_to_floor(ref_xn), self.camera.rays_to_floor(cur_xn)
+        ref_fl, cur_fl = self._floor(ref_xn, kf.height), self._floor(cur_xn, kf.height)
         # a repeated texture (or any pattern that the ORB tests cannot tell apart) can give a consistent but wrong
         # motion: each RANSAC winner must be confirmed by LK on the keyframe's corners, else the next consensus
         # among the remaining matches is tried. Only a strong ORB consensus stands on its own.
@@ -538,11 +572,11 @@ class VisualOdometry:
             if len(left) < c.orb_min_inliers:
                 break
             fit = self._fit(cur_xn[left], ref_xn[left], cur_fl[left], ref_fl[left], c.orb_threshold_px,
-                            c.orb_min_inliers, c.orb_min_inlier_ratio * len(ia) / len(left))
+                            c.orb_min_inliers, c.orb_min_inlier_ratio * len(ia) / len(left), h_ref=kf.height)
             if fit is None:
                 break
             if gate is None or t_pred is None or self._in_gate(fit, t_pred, gate[1]):
-                refined = self._track(kf.gray, kf.pts, kf.xn, kf.floor, gray, fit.delta)
+                refined = self._track(kf.gray, kf.pts, kf.xn, kf.floor, gray, fit.delta, h_ref=kf.height)
                 need = c.reacquire_min_fraction if confirm else c.orb_confirm_fraction
                 if refined[0] is not None and refined[0].n_inliers >= need * self._visible(kf, fit.delta):
                     return refined, Method.ORB_LK
@@ -578,7 +612,7 @@ class VisualOdometry:
         t_kc_pred = compose(self._t_kp, pred) if self._predicted else None
         gate = None if self._gate is None else (t_kc_pred, self._c_kp + self._gate[1])
         (fit, ref_px, cur_px, inl), method = self._measure(kf.gray, kf.pts, kf.xn, kf.floor, gray, t_kc_pred,
-                                                           keyframe=kf, gate=gate)
+                                                           keyframe=kf, gate=gate, h_ref=kf.height)
         if fit is None:
             return None
         tilt = self.config.refine_tilt  # the fit's covariance already covers the wobble
@@ -598,22 +632,33 @@ class VisualOdometry:
         c = self.config
         n_in = fit.n_inliers
         # a frame that needed a retry or descriptors is far from the keyframe (or the prediction is poor): renew,
-        # so the next frame is matched to a close keyframe (at a low rate the next one would barely overlap)
+        # so the next frame is matched to a close keyframe (at a low rate the next one would barely overlap); and
+        # renew when the next frame, moving on as this one did, would see too few of the keyframe's corners
         renew = (method != Method.LK or n_in < c.keyframe_min_inliers
-                 or n_in < c.keyframe_min_fraction * len(kf.pts) or abs(fit.delta[2]) > c.keyframe_max_rotation)
+                 or n_in < c.keyframe_min_fraction * len(kf.pts) or abs(fit.delta[2]) > c.keyframe_max_rotation
+                 or self._visible(kf, compose(fit.delta, delta)) < c.keyframe_min_inliers)
         if renew and self._start_keyframe(gray, index, timestamp):
             est.is_keyframe = True
         return est
 
     def _match_previous(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
+        c = self.config
         prev_px = self._prev_px
         prev_xn = self.camera.normalize(prev_px)
-        # the previous frame as a keyframe of the keyframe's corners it tracked, so descriptors can match it too
-        prev = _Keyframe(index=index - 1, timestamp=timestamp - dt, gray=self._prev_gray, pts=prev_px, xn=prev_xn,
-                         floor=self.camera.rays_to_floor(prev_xn))
-        gate = None if self._gate is None else (pred, self._gate[1])
-        (fit, ref_px, cur_px, _), method = self._measure(prev.gray, prev.pts, prev.xn, prev.floor, gray,
-                                                         pred if self._predicted else None, keyframe=prev, gate=gate)
+        h = self._height
+        (fit, ref_px, cur_px, _), method = self._measure(self._prev_gray, prev_px, prev_xn, self._floor(prev_xn, h),
+                                                         gray, pred if self._predicted else None, h_ref=h)
+        if fit is None and c.descriptors:
+            # descriptors against the previous frame, with corners of its own: the keyframe corners it tracked sit
+            # where it overlapped the keyframe, often not where it overlaps this frame (a low rate)
+            pts = detect_corners(self._prev_gray.fine, c.max_features, c.grid, c.quality, c.min_distance, c.border,
+                                 c.half_resolution_detection)
+            xn = self.camera.normalize(pts)
+            prev = _Keyframe(index=index - 1, timestamp=timestamp - dt, gray=self._prev_gray, pts=pts, xn=xn,
+                             floor=self._floor(xn, h), height=h)
+            gate = None if self._gate is None else (pred, self._gate[1])
+            (fit, ref_px, cur_px, _), method = self._descriptor_match(prev, gray, pred if self._predicted else None,
+                                                                      gate)
         if fit is None:
             return None
         cov = fit.covariance if self.config.refine_tilt else fit.covariance + self._model_covariance(dt, fit.delta)
@@ -672,6 +717,8 @@ class VisualOdometry:
 
     def _estimate(self, index, timestamp, delta, cov, ref, fit: RigidFit, ref_px, cur_px,
                   method: Method = Method.LK) -> VOEstimate:
+        if fit.height is not None:
+            self._frame_height = fit.height
         return VOEstimate(index=index, timestamp=timestamp, delta=delta, covariance=cov, status=VOStatus.OK,
                           reference=ref, method=method, n_matches=len(cur_px), n_inliers=fit.n_inliers,
                           inlier_ratio=fit.inlier_ratio, rms_px=fit.rms / self._m_per_px,
@@ -728,6 +775,11 @@ class VisualOdometry:
         est.pose = compose(prev, est.delta) if self._poses else np.zeros(3)
         self._poses.append(est.pose)
         self._covs.append(np.asarray(est.covariance, float))
+        self._height = self._frame_height
+        if dt and self.config.track_height:
+            self._h_int += self._height * dt
+            self._t_int += dt
+            self._h_mean = self._h_int / self._t_int
         if est.status == VOStatus.OK:
             self._failures = 0
             if dt and est.reference != Reference.REACQUIRED:  # a re-attachment jump is no velocity
