@@ -349,7 +349,8 @@ def run_regimes_command(args: argparse.Namespace) -> BenchResult:
     if args.out:
         write_json(args.out, {"benchmark": "odometry-regimes", "rows": rows, "targets": checks})
     if not args.only:
-        note = publish("odometry-regimes", md, "vslam bench odometry --regimes")
+        note = publish("odometry-regimes", md, "vslam bench odometry --regimes", getattr(args, "docs", None),
+                       getattr(args, "docs_file", None))
         if note:
             print(note)
     return BenchResult(None)
