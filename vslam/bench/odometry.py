@@ -341,7 +341,8 @@ def run_regimes_command(args: argparse.Namespace) -> BenchResult:
     with tempfile.TemporaryDirectory(prefix="vslam-bench-regimes-") as tmp:
         where = Path(args.data) if args.data else Path(tmp)
         where.mkdir(parents=True, exist_ok=True)
-        rows = odometry_regimes.run_regimes(where, args.only)
+        config = VOConfig.from_dict(parse_overrides(args.set), base=VOConfig.preset(args.preset))
+        rows = odometry_regimes.run_regimes(where, args.only, config)
     checks = odometry_regimes.targets(rows)
     md = odometry_regimes.table(rows) + "\n\ntargets: " + ", ".join(f"{k} {'met' if v else 'NOT met'}"
                                                                      for k, v in checks.items())

@@ -216,14 +216,14 @@ def measure(path: Path, fallback: bool = False, config: VOConfig | None = None) 
     return out
 
 
-def run_regimes(where: Path, only: str | None = None) -> list[dict]:
+def run_regimes(where: Path, only: str | None = None, config: VOConfig | None = None) -> list[dict]:
     rows = []
     for reg in regimes():
         if only and only not in reg.name:
             continue
         t0 = time.perf_counter()
         path = reg.make(where)
-        r = measure(path, reg.fallback)
+        r = measure(path, reg.fallback, config)
         r.update(regime=reg.name, renderer=reg.renderer, half="tuning" if reg.name in TUNING else "reporting",
                  low_rate=reg.low_rate, seconds=time.perf_counter() - t0)
         rows.append(r)
