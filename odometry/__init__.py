@@ -11,9 +11,9 @@ from odometry.rigid import RigidFit, kabsch_2d, ransac_rigid_2d
 from odometry.shared.camera import CameraModel
 from odometry.shared.footprint import footprint_overlap, footprint_polygon, overlap_matrix, overlap_pairs
 from odometry.shared.poses import between, compose, integrate, inverse, relative_motions, wrap_angle
-from odometry.vo import VisualOdometry, VOConfig, VOEstimate, VOStatus, VOTrajectory, run_visual_odometry
+from odometry.vo import Method, VisualOdometry, VOConfig, VOEstimate, VOStatus, VOTrajectory, run_visual_odometry
 
-__all__ = ["CameraModel", "FusedTrajectory", "FusionConfig", "RigidFit", "VOConfig", "VOEstimate", "VOStatus",
+__all__ = ["CameraModel", "FusedTrajectory", "FusionConfig", "Method", "RigidFit", "VOConfig", "VOEstimate", "VOStatus",
            "VOTrajectory", "VisualOdometry", "between", "compose", "footprint_overlap", "footprint_polygon",
            "fuse_wheel_gyro", "integrate", "inverse", "kabsch_2d", "overlap_matrix", "overlap_pairs",
            "ransac_rigid_2d", "relative_motions", "run_visual_odometry", "wrap_angle"]

@@ -26,6 +26,7 @@ class RigidFit:
         inliers: (N,) bool mask over the input pairs.
         rms: root-mean-square inlier residual (same unit as the points).
         sigma: per-axis residual standard deviation used for the covariance.
+        height: the camera height of the `src` frame when a refinement estimated it (None otherwise).
     """
 
     delta: np.ndarray
@@ -33,6 +34,7 @@ class RigidFit:
     inliers: np.ndarray
     rms: float
     sigma: float
+    height: float | None = None
 
     @property
     def n_inliers(self) -> int:

@@ -45,8 +45,8 @@ def _floor(camera: CameraModel, xn: np.ndarray, heights: np.ndarray, tilts: np.n
 
 
 def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarray, delta0: np.ndarray,
-                       tilt_sigma: float, height_sigma: float, sigma_floor: float, iterations: int = 2
-                       ) -> TiltFit | None:
+                       tilt_sigma: float, height_sigma: float, sigma_floor: float, iterations: int = 2,
+                       h_ref: float | None = None, s_prior: float = 0.0) -> TiltFit | None:
     """Gauss-Newton refinement of the planar motion ref -> cur with both frames' tilt and the height ratio.
 
     Args:
@@ -57,6 +57,8 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
         height_sigma: prior standard deviation of the height difference (m); 0 fixes it.
         sigma_floor: lower bound of the per-axis residual standard deviation (m) used for the covariance.
         iterations: Gauss-Newton steps (the problem is nearly linear: 2-3 suffice).
+        h_ref: the reference frame's camera height (default: the camera's nominal height).
+        s_prior: prior mean of s = h_cur / h_ref - 1 (e.g. pulling the current height towards the nominal one).
 
     Returns None with fewer than 8 points.
     """
@@ -65,9 +67,11 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
     n = len(xn_ref)
     if n < 8 or len(xn_cur) != n:
         return None
-    h = float(camera.camera_height)
+    h = float(camera.camera_height if h_ref is None else h_ref)
     q = np.zeros(8)
     q[:3] = delta0
+    mu = np.zeros(8)
+    mu[7] = s_prior
     # prior precisions (a zero sigma pins the parameter with a very stiff prior)
     prec = np.zeros(8)
     prec[3:7] = 1.0 / max(tilt_sigma, 1e-9) ** 2
@@ -99,7 +103,7 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
             # measurement noise from the rigid start: tilt effects only lower it, so this is conservative
             sigma2 = max(float(rf @ rf) / max(2 * n - 3, 1), sigma2)
         a = jf.T @ jf / sigma2 + np.diag(prec)
-        g = jf.T @ rf / sigma2 + prec * q
+        g = jf.T @ rf / sigma2 + prec * (q - mu)
         try:
             step = np.linalg.solve(a, -g)
         except np.linalg.LinAlgError:

@@ -25,14 +25,16 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Callable
 
+import cv2
 import numpy as np
 
+from odometry.descriptor_path import Features, match_features, orb_features
 from odometry.errors import OdometryError
-from odometry.rigid import RigidFit, ransac_rigid_2d
+from odometry.rigid import RigidFit, kabsch_2d, ransac_rigid_2d
 from odometry.shared.camera import CameraModel
 from odometry.shared.config import Config, ConfigError, setting
 from odometry.shared.pose_covariance import between_with_covariance, compose_with_covariance
-from odometry.shared.poses import compose
+from odometry.shared.poses import between, compose, wrap_angle
 from odometry.tilt_refine import refine_planar_tilt
 from odometry.tracking import (
     BadImage,
@@ -46,7 +48,7 @@ from odometry.tracking import (
     track_lk,
 )
 
-__all__ = ["Photometric", "Reference", "VOConfig", "VOEstimate", "VOStatus", "VOTrajectory", "VisualOdometry",
+__all__ = ["Method", "Photometric", "Reference", "VOConfig", "VOEstimate", "VOStatus", "VOTrajectory", "VisualOdometry",
            "run_visual_odometry"]
 
 
@@ -74,6 +76,18 @@ class Reference(str, Enum):
     NONE = "none"
     KEYFRAME = "keyframe"
     PREVIOUS = "previous"
+    REACQUIRED = "reacquired"  # an earlier keyframe, after tracking was lost (the trajectory is re-attached)
+
+
+class Method(str, Enum):
+    """How the correspondences of a frame were found (odometry.csv column `method`)."""
+
+    NONE = "none"              # vision did not measure this frame
+    LK = "lk"                  # the fast path: LK from the motion prediction (derotated when it predicts a turn)
+    LK_PYRAMID = "lk-pyramid"  # LK with a deep pyramid (a poor or missing prediction)
+    LK_SHIFT = "lk-shift"      # LK from a phase-correlation shift
+    ORB_LK = "orb+lk"          # ORB matches gave the motion, LK on the keyframe corners refined it
+    ORB = "orb"                # ORB matches alone (LK could not refine them)
 
 
 @dataclass(frozen=True)
@@ -140,6 +154,45 @@ class VOConfig(Config):
     coarse_retry: bool = True
     retry_levels: int = setting(3, range="[0, inf)")
     coarse_min_response: float = setting(0.05, range="[0, inf)")
+    # LK windows (15 px) are not rotated: beyond ~20 degrees their corners move by more than LK's linear range, so
+    # the current frame is first rotated back by the predicted rotation (about the principal point: exact for a
+    # radial lens). Above the 12 degree keyframe rule, so it never acts at high frame rates.
+    lk_max_rotation: float = setting(0.35, range="[0, inf)", unit="rad",
+                                     doc="predicted rotation since the keyframe above which LK runs derotated")
+    descriptors: bool = setting(True, doc="ORB matching when LK fails, to initialise and to re-acquire")
+    orb_features: int = setting(1500, range="[10, inf)", doc="ORB keypoints per frame on the descriptor path")
+    orb_fast_threshold: int = setting(8, range="[1, 255]", unit="grey levels", doc="FAST threshold of ORB")
+    orb_ratio: float = setting(0.8, range="(0, 1]", doc="Lowe's ratio test on Hamming distances")
+    orb_threshold_px: float = setting(3.0, range="(0, inf)", unit="px",
+                                      doc="RANSAC inlier distance for ORB matches (ORB keypoints are ~0.6 px RMS)")
+    orb_min_inliers: int = setting(12, range="[3, inf)", doc="fewer ORB inliers: the descriptor path fails")
+    orb_min_inlier_ratio: float = setting(0.1, range="[0, 1]",
+                                          doc="of the ratio-test survivors (many lie outside the overlap)")
+    orb_hypotheses: int = setting(3, range="[1, inf)", doc="RANSAC consensus sets tried in turn until LK confirms one")
+    # render_floor's mosaic holds rotated copies of the same photographs: 67 ORB inliers at a wrong place were
+    # seen, so an unconfirmed ORB motion must be far stronger than that
+    orb_strong_inliers: int = setting(150, range="[3, inf)",
+                                      doc="an ORB fit with this many inliers (and orb_strong_ratio) needs no LK")
+    orb_strong_ratio: float = setting(0.5, range="[0, 1]")
+    # LK confirms a place when it tracks a good share of the corners that place puts in view: a repeated copy of a
+    # texture patch covers only part of the view. Re-acquisition (any of several keyframes) asks for more.
+    orb_confirm_fraction: float = setting(0.3, range="[0, 1]",
+                                          doc="LK inliers / keyframe corners in view to confirm an ORB motion")
+    reacquire_min_fraction: float = setting(0.5, range="[0, 1]", doc="the same when re-acquiring")
+    prediction_gate: float = setting(6.0, range="(0, inf)", unit="sigma",
+                                     doc="a descriptor motion this far from the given fallback motion is rejected")
+    reacquire_keyframes: int = setting(6, range="[0, inf)",
+                                       doc="recent keyframes a frame is matched against after tracking was lost")
+    reanchor_frames: int = setting(100, range="[0, inf)",
+                                   doc="frames after a loss during which each frame tries to re-attach to them")
+    # the camera height is not constant (suspension, floor unevenness; a drone's altitude hold): a height error is
+    # a scale error of every motion. The tilt refinement measures each frame's height relative to its keyframe;
+    # chaining those ratios gives it relative to the first frame, and the mean over the run so far is taken to
+    # be the nominal camera_height (the first frame's own height is not known).
+    # off by default: measured, it halves the drift where the height wobbles 1 % without tilt (the independent
+    # renderer: 0.47 -> 0.26 % per 1 m) but raises it where tilt wobble is confounded with it (our simulator's
+    # natural floors: 0.106 -> 0.153 %), and the 30 fps fast path must not lose accuracy
+    track_height: bool = setting(False, doc="estimate the camera height frame by frame (needs refine_tilt)")
     seed: int = setting(0, range="[0, inf)")
 
     def check(self) -> None:
@@ -156,7 +209,8 @@ class VOEstimate:
         delta: (3,) motion from the previous frame (dx, dy, dtheta): pose = compose(previous pose, delta).
         covariance: (3, 3) covariance of delta (x, y, theta order; usable as a GTSAM Pose2 noise model).
         status: INIT / OK / FALLBACK / LOST.
-        reference: what vision matched against (keyframe, previous frame or none).
+        reference: what vision matched against (keyframe, previous frame, an earlier keyframe or none).
+        method: how the correspondences were found (LK fast path, its retries, ORB descriptors).
         n_matches, n_inliers, inlier_ratio: tracked correspondences and the RANSAC inliers among them.
         rms_px: RMS inlier residual in pixels (NaN without a fit).
         is_keyframe: this frame starts a new keyframe.
@@ -177,6 +231,7 @@ class VOEstimate:
     covariance: np.ndarray
     status: VOStatus
     reference: Reference = Reference.NONE
+    method: Method = Method.NONE
     n_matches: int = 0
     n_inliers: int = 0
     inlier_ratio: float = 0.0
@@ -215,6 +270,8 @@ class _Keyframe:
     pts: np.ndarray      # (N, 2) float32 corner pixels
     xn: np.ndarray       # (N, 2) their undistorted normalised coordinates
     floor: np.ndarray    # (N, 2) their floor points in the keyframe's base frame
+    orb: Features | None = None  # ORB features, computed when the descriptor path first needs them
+    height: float = 1.0          # camera height at this frame relative to the first frame's (track_height)
 
 
 class VisualOdometry:
@@ -236,6 +293,7 @@ class VisualOdometry:
         self._rng = np.random.default_rng(self.config.seed)
         self._m_per_px = camera.ground_resolution()
         self._poses: list[np.ndarray] = []
+        self._covs: list[np.ndarray] = []         # covariance of each frame's delta (for re-acquisition)
         self._last_t: float | None = None
         self._velocity: np.ndarray | None = None  # last measured motion per second
         self._kf: _Keyframe | None = None
@@ -247,6 +305,18 @@ class VisualOdometry:
         self._failures = 0                        # consecutive frames vision could not measure
         self._fit_seconds = 0.0
         self._predicted = False
+        # re-acquisition: recent keyframes whose poses belong to the trajectory, and whether the current keyframe
+        # chain does (a keyframe restarted after a loss starts from a guessed pose until it is re-attached)
+        self._bank: list[_Keyframe] = []
+        self._anchored = True
+        self._unanchored_since: int | None = None
+        self._frame_orb: Features | None = None   # ORB features of the frame being processed, when computed
+        self._gate: tuple[np.ndarray, np.ndarray] | None = None  # fallback motion since the previous frame + cov
+        # camera heights relative to the first frame's: of the previous frame, of the frame being processed, and
+        # their time-weighted mean so far, which is taken to be the nominal camera_height
+        self._height = 1.0
+        self._frame_height = 1.0
+        self._h_mean, self._h_int, self._t_int = 1.0, 0.0, 0.0
 
     # ------------------------------------------------------------------ public state
     @property
@@ -267,6 +337,8 @@ class VisualOdometry:
         timestamp = float(timestamp)
         index = len(self._poses)
         self._fit_seconds = 0.0
+        self._frame_orb = None
+        self._frame_height = self._height
         if self._last_t is not None and not timestamp > self._last_t:
             raise OdometryError(f"frame {index}: timestamp {timestamp!r} does not increase (previous {self._last_t!r})")
         dt = None if self._last_t is None else timestamp - self._last_t
@@ -298,6 +370,9 @@ class VisualOdometry:
 
         pred, pred_cov = self._prediction(dt, fallback)
         self._predicted = fallback is not None or self._velocity is not None
+        # descriptor motions are checked against the fallback motion when there is one (wheel odometry): a
+        # constant-velocity guess says nothing at a turn, so without a fallback there is no gate
+        self._gate = (pred, pred_cov * self.config.fallback_inflation) if fallback is not None else None
         est = None
         if gray is not None and self._kf is not None:
             est = self._match_keyframe(gray, index, timestamp, dt, pred)
@@ -308,6 +383,12 @@ class VisualOdometry:
                 reason = "too few inliers"
         elif gray is not None:
             reason = "no keyframe to match (tracking was lost)"
+        if gray is not None and self._should_reacquire(est, index):
+            found = self._reacquire(gray, index, timestamp)
+            est = found if found is not None else est
+        if self._unanchored_since is not None and index - self._unanchored_since > self.config.reanchor_frames:
+            # nothing earlier was seen again: accept the break and let the new keyframes serve re-acquisition
+            self._anchored, self._unanchored_since = True, None
         if est is None:
             est = self._failure(index, timestamp, reason, fallback, pred, pred_cov, gray)
         self._finish(est, gray, timestamp, dt)
@@ -341,39 +422,66 @@ class VisualOdometry:
                 reason_out.reason = f"too few corners for a keyframe ({len(pts)} < {c.min_features})"
             return False
         xn = self.camera.normalize(pts)
+        h = self._frame_height
         self._kf = _Keyframe(index=index, timestamp=timestamp, gray=gray, pts=pts, xn=xn,
-                             floor=self.camera.rays_to_floor(xn))
+                             floor=self._floor(xn, h), orb=self._frame_orb, height=h)
         self._t_kp = np.zeros(3)
         self._c_kp = np.zeros((3, 3))
         self._c_kp_fit = np.zeros((3, 3))
         self._prev_px = pts
+        if self._anchored and c.descriptors and c.reacquire_keyframes > 0:
+            self._bank = (self._bank + [self._kf])[-c.reacquire_keyframes:]
         return True
 
-    def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray,
-             ref_floor: np.ndarray) -> RigidFit | None:
-        """RANSAC + Kabsch on floor points (cur -> ref), then the tilt-aware refinement on the inliers."""
+    def _abs_height(self, rel: float | None) -> float:
+        """Metres of a relative height: the mean relative height so far is the nominal camera_height."""
+        h0 = self.camera.camera_height
+        if rel is None or not self.config.track_height:
+            return h0
+        return h0 * rel / self._h_mean
+
+    def _floor(self, xn: np.ndarray, rel_height: float | None) -> np.ndarray:
+        """Floor points of rays for the camera at a relative height (nominal: `CameraModel.rays_to_floor`)."""
+        h = self._abs_height(rel_height)
+        if h == self.camera.camera_height:
+            return self.camera.rays_to_floor(xn)
+        return self.camera.rays_to_floor_batch(xn, [h], [self.camera.tilt])[0]
+
+    def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray, ref_floor: np.ndarray,
+             threshold_px: float | None = None, min_inliers: int | None = None,
+             min_ratio: float | None = None, h_ref: float | None = None) -> RigidFit | None:
+        """RANSAC + Kabsch on floor points (cur -> ref, both at the reference's relative height `h_ref`), then the
+        tilt-aware refinement on the inliers, which also measures the current frame's relative height
+        (`RigidFit.height`, with track_height)."""
         c = self.config
+        threshold_px = c.ransac_threshold_px if threshold_px is None else threshold_px
+        min_inliers = c.min_inliers if min_inliers is None else min_inliers
+        min_ratio = c.min_inlier_ratio if min_ratio is None else min_ratio
         t0 = time.perf_counter()
-        fit = ransac_rigid_2d(cur_floor, ref_floor, c.ransac_threshold_px * self._m_per_px, rng=self._rng,
+        fit = ransac_rigid_2d(cur_floor, ref_floor, threshold_px * self._m_per_px, rng=self._rng,
                               max_iterations=c.ransac_iterations, confidence=c.ransac_confidence,
                               sigma_floor=c.pixel_sigma * self._m_per_px)
-        if fit is not None and fit.n_inliers >= c.min_inliers and fit.inlier_ratio >= c.min_inlier_ratio \
-                and c.refine_tilt:
+        if fit is not None and fit.n_inliers >= min_inliers and fit.inlier_ratio >= min_ratio and c.refine_tilt:
+            h = self._abs_height(h_ref)
             tf = refine_planar_tilt(self.camera, ref_xn[fit.inliers], cur_xn[fit.inliers], fit.delta,
-                                    c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px)
+                                    c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px,
+                                    h_ref=None if h == self.camera.camera_height else h)
             if tf is not None:
                 fit.delta, fit.covariance, fit.rms, fit.sigma = tf.delta, tf.covariance, tf.rms, tf.sigma
+                if c.track_height and h_ref is not None:
+                    fit.height = h_ref * (1.0 + float(tf.params[7]))
         self._fit_seconds += time.perf_counter() - t0
-        if fit is None or fit.n_inliers < c.min_inliers or fit.inlier_ratio < c.min_inlier_ratio:
+        if fit is None or fit.n_inliers < min_inliers or fit.inlier_ratio < min_ratio:
             return None
         fit.covariance = fit.covariance * c.covariance_scale
         return fit
 
     def _track(self, ref_gray: _Images, ref_px: np.ndarray, ref_xn: np.ndarray, ref_floor: np.ndarray,
-               gray: _Images, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None
-               ) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
+               gray: _Images, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None,
+               h_ref: float | None = None) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
         """LK from a reference frame, started at the positions predicted by the motion t_ref_cur (or by a global
-        image `shift` when given); then the robust fit."""
+        image `shift` when given); then the robust fit. A large predicted rotation is taken out of the current
+        frame first (LK windows do not rotate)."""
         c = self.config
         if shift is None:
             guess_floor = (ref_floor - t_ref_cur[:2]) @ _rot(t_ref_cur[2])  # reference floor points, current frame
@@ -384,38 +492,115 @@ class VisualOdometry:
         m = 2 * c.border
         visible = (guess[:, 0] > -m) & (guess[:, 0] < w + m) & (guess[:, 1] > -m) & (guess[:, 1] < h + m)
         ref_px, ref_xn, ref_floor, guess = ref_px[visible], ref_xn[visible], ref_floor[visible], guess[visible]
+        fine, coarse, back = gray.fine, gray.coarse, None
+        if shift is None and len(guess) >= 2:
+            phi = kabsch_2d(ref_px, guess)[2]   # rotation of the image content, reference -> current
+            if abs(phi) > c.lk_max_rotation:
+                fwd, back = _derotation(phi, (self.camera.cx, self.camera.cy))
+                fine = cv2.warpAffine(fine, fwd, (w, h), flags=cv2.INTER_LINEAR, borderValue=128)
+                if levels is not None and levels > c.lk_levels:
+                    coarse = cv2.warpAffine(coarse, fwd, (w, h), flags=cv2.INTER_LINEAR, borderValue=128)
+                guess = _affine(fwd, guess)
         if levels is not None and levels > c.lk_levels:
             # a wide capture range first, on images that keep their low frequencies, then the precise pass
-            coarse_px, coarse_ok = track_lk(ref_gray.coarse, gray.coarse, ref_px, guess, c.lk_window, levels,
+            coarse_px, coarse_ok = track_lk(ref_gray.coarse, coarse, ref_px, guess, c.lk_window, levels,
                                             c.lk_iterations, c.lk_epsilon, c.lk_min_eig)
             guess = np.where(coarse_ok[:, None], coarse_px, guess)
-        cur_px, ok = track_lk(ref_gray.fine, gray.fine, ref_px, guess, c.lk_window, c.lk_levels, c.lk_iterations,
+        cur_px, ok = track_lk(ref_gray.fine, fine, ref_px, guess, c.lk_window, c.lk_levels, c.lk_iterations,
                               c.lk_epsilon, c.lk_min_eig)
+        if back is not None:
+            cur_px = _affine(back, cur_px)
+            ok &= (cur_px[:, 0] >= 0) & (cur_px[:, 0] <= w - 1) & (cur_px[:, 1] >= 0) & (cur_px[:, 1] <= h - 1)
         ref_px, ref_xn, ref_floor, cur_px = ref_px[ok], ref_xn[ok], ref_floor[ok], cur_px[ok]
         if len(cur_px) < c.min_inliers:
             return None, ref_px, cur_px, np.zeros(len(cur_px), bool)
         cur_xn = self.camera.normalize(cur_px)
-        fit = self._fit(cur_xn, ref_xn, self.camera.rays_to_floor(cur_xn), ref_floor)
+        fit = self._fit(cur_xn, ref_xn, self._floor(cur_xn, h_ref), ref_floor, h_ref=h_ref)
         return fit, ref_px, cur_px, (fit.inliers if fit is not None else np.zeros(len(cur_px), bool))
 
-    def _track_with_retry(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur):
-        """Track from the motion prediction; if that fails (or there is none), retry from a phase-correlation shift
-        with a deeper LK pyramid: the prediction may be missing or wrong (first frames, wheel slip, a dropped
-        frame) and the shift ignores rotation."""
+    def _measure(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, keyframe=None, gate=None, h_ref=None):
+        """The motion from a reference frame, trying in turn: LK from the prediction (the fast path), LK with a
+        deep pyramid from it, ORB matches against the keyframe refined by LK (any rotation, large shifts; only
+        for a `keyframe`), LK from a phase-correlation shift, and without a prediction LK from no motion.
+        Returns ((fit, ref_px, cur_px, inliers), Method)."""
         c = self.config
         deep = max(c.lk_levels, c.retry_levels)
-        out = (None,) if t_ref_cur is None else self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur)
-        if out[0] is None and t_ref_cur is not None and deep > c.lk_levels:
-            # a poor prediction (slip, failed frames in between): the same start with a wider capture range
-            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep)
+        out, method = _NO_MATCH, Method.NONE
+        if t_ref_cur is not None:
+            out, method = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, h_ref=h_ref), Method.LK
+            if out[0] is None and deep > c.lk_levels:
+                # a poor prediction (slip, failed frames in between): the same start with a wider capture range
+                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep, h_ref=h_ref)
+                method = Method.LK_PYRAMID
+        if out[0] is None and keyframe is not None and c.descriptors:
+            out, method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
         if out[0] is None and c.coarse_retry:
             shift, response = coarse_shift(ref_gray.coarse, gray.coarse)
             if response > c.coarse_min_response:
-                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), shift=shift, levels=deep)
+                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), shift=shift, levels=deep,
+                                  h_ref=h_ref)
+                method = Method.LK_SHIFT
         if out[0] is None and t_ref_cur is None:
-            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3),
-                              levels=max(c.lk_levels, c.retry_levels))
-        return out
+            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), levels=deep, h_ref=h_ref)
+            method = Method.LK_PYRAMID
+        return out, (method if out[0] is not None else Method.NONE)
+
+    def _orb(self, images: _Images) -> Features:
+        c = self.config
+        return orb_features(images.coarse, c.orb_features, c.orb_fast_threshold, c.border)
+
+    def _descriptor_match(self, kf: _Keyframe, gray: _Images, t_pred: np.ndarray | None,
+                          gate: tuple[np.ndarray, np.ndarray] | None, confirm: bool = False):
+        """ORB matches keyframe -> frame, the rigid fit on their floor points, then LK on the keyframe's corners
+        started from that motion (sub-pixel). `gate` = (predicted motion, covariance): a fit outside it is
+        rejected (a repeated pattern can match the wrong place). With `confirm`, only LK-confirmed motions count
+        (re-acquisition: the keyframe may be any of several, so a wrong place is likelier)."""
+        c = self.config
+        none = (_NO_MATCH, Method.NONE)
+        if kf.orb is None:
+            kf.orb = self._orb(kf.gray)
+        if self._frame_orb is None:
+            self._frame_orb = self._orb(gray)
+        ia, ib = match_features(kf.orb, self._frame_orb, c.orb_ratio)
+        if len(ia) < c.orb_min_inliers:
+            return none
+        ref_px, cur_px = kf.orb.pts[ia], self._frame_orb.pts[ib]
+        ref_xn, cur_xn = self.camera.normalize(ref_px), self.camera.normalize(cur_px)
+        ref_fl, cur_fl = self._floor(ref_xn, kf.height), self._floor(cur_xn, kf.height)
+        # a repeated texture (or any pattern that the ORB tests cannot tell apart) can give a consistent but wrong
+        # motion: each RANSAC winner must be confirmed by LK on the keyframe's corners, else the next consensus
+        # among the remaining matches is tried. Only a strong ORB consensus stands on its own.
+        left = np.arange(len(ia))
+        for _ in range(c.orb_hypotheses):
+            if len(left) < c.orb_min_inliers:
+                break
+            fit = self._fit(cur_xn[left], ref_xn[left], cur_fl[left], ref_fl[left], c.orb_threshold_px,
+                            c.orb_min_inliers, c.orb_min_inlier_ratio * len(ia) / len(left), h_ref=kf.height)
+            if fit is None:
+                break
+            if gate is None or t_pred is None or self._in_gate(fit, t_pred, gate[1]):
+                refined = self._track(kf.gray, kf.pts, kf.xn, kf.floor, gray, fit.delta, h_ref=kf.height)
+                need = c.reacquire_min_fraction if confirm else c.orb_confirm_fraction
+                if refined[0] is not None and refined[0].n_inliers >= need * self._visible(kf, fit.delta):
+                    return refined, Method.ORB_LK
+                if not confirm and fit.n_inliers >= c.orb_strong_inliers \
+                        and fit.n_inliers >= c.orb_strong_ratio * len(ia):
+                    return (fit, ref_px[left], cur_px[left], fit.inliers), Method.ORB
+            left = left[~fit.inliers]
+        return none
+
+    def _visible(self, kf: _Keyframe, t_kc: np.ndarray) -> int:
+        """How many of the keyframe's corners the motion t_kc puts inside the current image."""
+        px = self.camera.floor_to_pixel((kf.floor - t_kc[:2]) @ _rot(t_kc[2]))
+        w, h = self.camera.size
+        return int(((px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)).sum())
+
+    def _in_gate(self, fit: RigidFit, t_pred: np.ndarray, cov: np.ndarray) -> bool:
+        c = self.config
+        e = fit.delta - t_pred
+        e[2] = wrap_angle(e[2])
+        s = cov + fit.covariance + np.diag([(c.orb_threshold_px * self._m_per_px) ** 2] * 2 + [1e-4])
+        return float(e @ np.linalg.solve(s, e)) <= c.prediction_gate ** 2
 
     def _model_covariance(self, dt: float, motion: np.ndarray) -> np.ndarray:
         """What the planar model misses between two frames dt apart: tilt/height wobble (see VOConfig)."""
@@ -428,7 +613,9 @@ class VisualOdometry:
     def _match_keyframe(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
         kf = self._kf
         t_kc_pred = compose(self._t_kp, pred) if self._predicted else None
-        fit, ref_px, cur_px, inl = self._track_with_retry(kf.gray, kf.pts, kf.xn, kf.floor, gray, t_kc_pred)
+        gate = None if self._gate is None else (t_kc_pred, self._c_kp + self._gate[1])
+        (fit, ref_px, cur_px, inl), method = self._measure(kf.gray, kf.pts, kf.xn, kf.floor, gray, t_kc_pred,
+                                                           keyframe=kf, gate=gate, h_ref=kf.height)
         if fit is None:
             return None
         tilt = self.config.refine_tilt  # the fit's covariance already covers the wobble
@@ -440,29 +627,45 @@ class VisualOdometry:
             cov = cov + self._model_covariance(dt, delta)
         else:
             delta, cov = between_with_covariance(self._t_kp, self._c_kp, fit.delta, c_kc)
-        est = self._estimate(index, timestamp, delta, cov, Reference.KEYFRAME, fit, ref_px, cur_px)
+        est = self._estimate(index, timestamp, delta, cov, Reference.KEYFRAME, fit, ref_px, cur_px, method)
         est.keyframe_index, est.keyframe_delta, est.keyframe_covariance = kf.index, fit.delta, c_kc
         self._t_kp, self._c_kp, self._c_kp_fit = fit.delta, c_kc, fit.covariance
         self._prev_px = cur_px[inl]
         # keep or renew the keyframe
         c = self.config
         n_in = fit.n_inliers
-        renew = (n_in < c.keyframe_min_inliers or n_in < c.keyframe_min_fraction * len(kf.pts)
-                 or abs(fit.delta[2]) > c.keyframe_max_rotation)
+        # a frame that needed a retry or descriptors is far from the keyframe (or the prediction is poor): renew,
+        # so the next frame is matched to a close keyframe (at a low rate the next one would barely overlap); and
+        # renew when the next frame, moving on as this one did, would see too few of the keyframe's corners
+        renew = (method != Method.LK or n_in < c.keyframe_min_inliers
+                 or n_in < c.keyframe_min_fraction * len(kf.pts) or abs(fit.delta[2]) > c.keyframe_max_rotation
+                 or self._visible(kf, compose(fit.delta, delta)) < c.keyframe_min_inliers)
         if renew and self._start_keyframe(gray, index, timestamp):
             est.is_keyframe = True
         return est
 
     def _match_previous(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
+        c = self.config
         prev_px = self._prev_px
         prev_xn = self.camera.normalize(prev_px)
-        fit, ref_px, cur_px, _ = self._track_with_retry(self._prev_gray, prev_px, prev_xn,
-                                                        self.camera.rays_to_floor(prev_xn), gray,
-                                                        pred if self._predicted else None)
+        h = self._height
+        (fit, ref_px, cur_px, _), method = self._measure(self._prev_gray, prev_px, prev_xn, self._floor(prev_xn, h),
+                                                         gray, pred if self._predicted else None, h_ref=h)
+        if fit is None and c.descriptors:
+            # descriptors against the previous frame, with corners of its own: the keyframe corners it tracked sit
+            # where it overlapped the keyframe, often not where it overlaps this frame (a low rate)
+            pts = detect_corners(self._prev_gray.fine, c.max_features, c.grid, c.quality, c.min_distance, c.border,
+                                 c.half_resolution_detection)
+            xn = self.camera.normalize(pts)
+            prev = _Keyframe(index=index - 1, timestamp=timestamp - dt, gray=self._prev_gray, pts=pts, xn=xn,
+                             floor=self._floor(xn, h), height=h)
+            gate = None if self._gate is None else (pred, self._gate[1])
+            (fit, ref_px, cur_px, _), method = self._descriptor_match(prev, gray, pred if self._predicted else None,
+                                                                      gate)
         if fit is None:
             return None
         cov = fit.covariance if self.config.refine_tilt else fit.covariance + self._model_covariance(dt, fit.delta)
-        est = self._estimate(index, timestamp, fit.delta, cov, Reference.PREVIOUS, fit, ref_px, cur_px)
+        est = self._estimate(index, timestamp, fit.delta, cov, Reference.PREVIOUS, fit, ref_px, cur_px, method)
         # the keyframe could not be tracked: this frame replaces it
         if self._start_keyframe(gray, index, timestamp):
             est.is_keyframe = True
@@ -472,9 +675,55 @@ class VisualOdometry:
             self._kf = None
         return est
 
-    def _estimate(self, index, timestamp, delta, cov, ref, fit: RigidFit, ref_px, cur_px) -> VOEstimate:
+    def _should_reacquire(self, est: VOEstimate | None, index: int) -> bool:
+        """Match against the recent keyframes when vision failed, or while the keyframe chain restarted after a
+        loss is not yet re-attached to them."""
+        c = self.config
+        if not (c.descriptors and c.reacquire_keyframes > 0 and self._bank):
+            return False
+        if est is None:
+            return True
+        return self._unanchored_since is not None and index - self._unanchored_since <= c.reanchor_frames
+
+    def _chain(self, start: int) -> tuple[np.ndarray, np.ndarray]:
+        """Pose of the previous frame in frame `start`'s frame, and its covariance (the deltas in between)."""
+        t, cov = np.zeros(3), np.zeros((3, 3))
+        for k in range(start + 1, len(self._poses)):
+            t, cov = compose_with_covariance(t, cov, between(self._poses[k - 1], self._poses[k]), self._covs[k])
+        return t, cov
+
+    def _reacquire(self, gray: _Images, index: int, timestamp: float) -> VOEstimate | None:
+        """Re-acquisition: ORB matches against the recent keyframes whose poses are on the trajectory (newest
+        first). A match places this frame relative to that keyframe, so the trajectory continues from where it
+        was, whatever was guessed in between; the frame starts an anchored keyframe."""
+        for kf in reversed(self._bank):
+            if kf is self._kf and self._anchored:
+                continue  # already tried by the keyframe path
+            t_jp, c_jp = self._chain(kf.index)
+            gate = None
+            if self._gate is not None:
+                gate = (compose(t_jp, self._gate[0]), c_jp + self._gate[1])
+            (fit, ref_px, cur_px, inl), method = self._descriptor_match(kf, gray, None if gate is None else gate[0],
+                                                                        gate, confirm=True)
+            if fit is None:
+                continue
+            delta, cov = between_with_covariance(t_jp, c_jp, fit.delta, fit.covariance)
+            est = self._estimate(index, timestamp, delta, cov, Reference.REACQUIRED, fit, ref_px, cur_px, method)
+            est.keyframe_index, est.keyframe_delta, est.keyframe_covariance = kf.index, fit.delta, fit.covariance
+            self._kf, self._t_kp, self._c_kp, self._c_kp_fit = kf, fit.delta, fit.covariance, fit.covariance
+            self._prev_px = cur_px[inl]
+            self._anchored, self._unanchored_since = True, None
+            if self._start_keyframe(gray, index, timestamp):
+                est.is_keyframe = True
+            return est
+        return None
+
+    def _estimate(self, index, timestamp, delta, cov, ref, fit: RigidFit, ref_px, cur_px,
+                  method: Method = Method.LK) -> VOEstimate:
+        if fit.height is not None:
+            self._frame_height = fit.height
         return VOEstimate(index=index, timestamp=timestamp, delta=delta, covariance=cov, status=VOStatus.OK,
-                          reference=ref, n_matches=len(cur_px), n_inliers=fit.n_inliers,
+                          reference=ref, method=method, n_matches=len(cur_px), n_inliers=fit.n_inliers,
                           inlier_ratio=fit.inlier_ratio, rms_px=fit.rms / self._m_per_px,
                           keypoints=np.asarray(cur_px, dtype=float),
                           matches=np.column_stack([ref_px, cur_px]).astype(float), inliers=fit.inliers)
@@ -502,7 +751,12 @@ class VisualOdometry:
                                                          and self._failures > c.max_failures_before_reset):
                 self._kf = None
         if gray is not None and self._kf is None:
-            # a usable frame and nothing to match it to: restart tracking from it
+            # a usable frame and nothing to match it to: restart tracking from it. Its pose is a guess, so its
+            # keyframes stay out of the re-acquisition bank until a frame re-attaches them
+            if self._bank:
+                self._anchored = False
+                if self._unanchored_since is None:
+                    self._unanchored_since = index
             if self._start_keyframe(gray, index, timestamp, reason_out=est):
                 est.is_keyframe = True
         if self._kf is not None:
@@ -523,12 +777,35 @@ class VisualOdometry:
         prev = self._poses[-1] if self._poses else np.zeros(3)
         est.pose = compose(prev, est.delta) if self._poses else np.zeros(3)
         self._poses.append(est.pose)
+        self._covs.append(np.asarray(est.covariance, float))
+        self._height = self._frame_height
+        if dt and self.config.track_height:
+            self._h_int += self._height * dt
+            self._t_int += dt
+            self._h_mean = self._h_int / self._t_int
         if est.status == VOStatus.OK:
             self._failures = 0
-            if dt:
+            if dt and est.reference != Reference.REACQUIRED:  # a re-attachment jump is no velocity
                 self._velocity = est.delta / dt
         self._last_t = timestamp
         self._prev_gray = gray
+
+
+_NO_MATCH = (None, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool))
+
+
+def _derotation(phi: float, centre: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """2x3 affine maps that rotate pixels by -phi about `centre` (forward) and back."""
+    def rot(a: float) -> np.ndarray:
+        c, s = math.cos(a), math.sin(a)
+        r = np.array([[c, -s], [s, c]])
+        ctr = np.asarray(centre, float)
+        return np.column_stack([r, ctr - r @ ctr])
+    return rot(-phi), rot(phi)
+
+
+def _affine(m: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    return np.asarray(pts, float) @ m[:, :2].T + m[:, 2]
 
 
 def _rot(theta: float) -> np.ndarray:
@@ -543,7 +820,8 @@ class VOTrajectory:
     """Batch result of `run_visual_odometry` (small per-frame arrays only: memory stays bounded).
 
     poses (N, 3) start at the origin; deltas (N, 3) with deltas[0] = 0; covariances (N, 3, 3) of the deltas;
-    status (N,) VOStatus values; vo_seconds / image_seconds (N,) time of the VO step and of fetching the image.
+    status (N,) VOStatus values; method (N,) Method values (how each frame was matched); vo_seconds /
+    image_seconds (N,) time of the VO step and of fetching the image.
     """
 
     timestamps: np.ndarray
@@ -560,6 +838,7 @@ class VOTrajectory:
     reason: list
     vo_seconds: np.ndarray
     image_seconds: np.ndarray
+    method: list = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.timestamps)
@@ -567,7 +846,7 @@ class VOTrajectory:
     def csv_rows(self) -> list[str]:
         """`odometry.csv` lines: header then one row per frame."""
         rows = ["index,timestamp,status,reference,dx,dy,dtheta,sigma_x,sigma_y,sigma_theta,n_matches,n_inliers,"
-                "inlier_ratio,rms_px,is_keyframe,vo_ms,reason"]
+                "inlier_ratio,rms_px,is_keyframe,vo_ms,reason,method"]
         for i in range(len(self.timestamps)):
             d, cv = self.deltas[i], self.covariances[i]
             sig = np.sqrt(np.maximum(np.diag(cv), 0.0))
@@ -575,7 +854,8 @@ class VOTrajectory:
             rows.append(f"{i},{self.timestamps[i]:.6f},{self.status[i].value},{self.reference[i].value},"
                         f"{d[0]:.9f},{d[1]:.9f},{d[2]:.9f},{sig[0]:.3e},{sig[1]:.3e},{sig[2]:.3e},"
                         f"{self.n_matches[i]},{self.n_inliers[i]},{self.inlier_ratio[i]:.4f},{self.rms_px[i]:.4f},"
-                        f"{int(self.is_keyframe[i])},{self.vo_seconds[i] * 1e3:.3f},{reason}")
+                        f"{int(self.is_keyframe[i])},{self.vo_seconds[i] * 1e3:.3f},{reason},"
+                        f"{(self.method[i] if i < len(self.method) else Method.NONE).value}")
         return rows
 
 
@@ -606,7 +886,7 @@ def run_visual_odometry(camera: CameraModel, timestamps: np.ndarray, get_image: 
     kf = np.zeros(n, bool)
     t_vo = np.zeros(n)
     t_img = np.zeros(n)
-    status, ref, reason = [], [], []
+    status, ref, reason, method = [], [], [], []
     for i in range(n):
         t0 = time.perf_counter()
         try:
@@ -627,10 +907,11 @@ def run_visual_odometry(camera: CameraModel, timestamps: np.ndarray, get_image: 
             est.is_keyframe
         status.append(est.status)
         ref.append(est.reference)
+        method.append(est.method)
         reason.append(est.reason)
         t_img[i], t_vo[i] = t1 - t0, t2 - t1
         if on_frame is not None:
             on_frame(est)
     return VOTrajectory(timestamps=ts, poses=vo.poses, deltas=deltas, covariances=covs, status=status,
                         n_matches=n_m, n_inliers=n_i, inlier_ratio=ratio, rms_px=rms, is_keyframe=kf,
-                        reference=ref, reason=reason, vo_seconds=t_vo, image_seconds=t_img)
+                        reference=ref, reason=reason, vo_seconds=t_vo, image_seconds=t_img, method=method)

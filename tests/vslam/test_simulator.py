@@ -156,3 +156,43 @@ def test_cli_simulate_and_info(tmp_path, capsys):
     (out / "camera.yaml").write_text((out / "camera.yaml").read_text().replace("fx:", "fx_typo:"))
     assert main(["info", str(out)]) == 2
     assert "camera.yaml" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------------- issue 13
+
+def test_lanes_alternate_direction_and_turn_in_place():
+    cfg = replace(SMALL, trajectory="lanes", lanes=3, lane_spacing=0.4, length=3 * 1.0 + 2 * 0.4, speed=0.5)
+    c = plan_motion(cfg)
+    p = c.poses
+    assert np.allclose(p[-1, :2], [1.0, 0.8], atol=1e-6)            # three 1 m lanes, 0.4 m apart
+    assert math.isclose(math.cos(p[-1, 2]), 1.0, abs_tol=1e-9)      # lane 3 flies like lane 1
+    turning = (np.abs(c.omega) > 0)
+    assert np.all(c.v[turning] == 0)                                # turns are in place
+    heading = p[:-1, 2][np.abs(c.v) > 0]
+    assert np.any(np.isclose(np.cos(heading), -1.0))                # lane 2 is flown backwards
+    assert math.isclose(np.sum(np.abs(c.omega)) / cfg.sensor_rate, 2 * math.pi, rel_tol=1e-6)  # 2 x 180 deg
+
+
+def test_scene_scale_renders_the_same_view_at_any_height(tmp_path):
+    """A camera at 40 m over the floor magnified 80x sees what a camera at 0.5 m sees: the ground photographs
+    keep their pixel size (aerial-like scenes), while poses, odometry and camera.yaml are in true metres."""
+    eff = Effects.preset("none")
+    low = simulate(replace(SMALL, effects=eff, max_frames=3), tmp_path / "low")
+    cfg = replace(SMALL, effects=eff, max_frames=3, camera_height=40.0, scene_scale=80.0, length=160.0, speed=40.0,
+                  turn_radius=80.0)
+    high = simulate(cfg, tmp_path / "high")
+    a, b = open_sequence(low.path), open_sequence(high.path)
+    assert b.require_camera().camera_height == 40.0
+    assert np.array_equal(a.image(0, gray=True), b.image(0, gray=True))
+    assert np.allclose(b.groundtruth_planar()[:, :2], 80.0 * a.groundtruth_planar()[:, :2], atol=1e-6)
+
+
+def test_dropped_runs_and_exposure_jumps(tmp_path):
+    eff = replace(Effects.preset("none"), dropped_frames=0.05, dropped_run=4, exposure_jumps=0.3,
+                  exposure_jump_size=0.6)
+    res = simulate(replace(SMALL, effects=eff, length=6.0), tmp_path / "s")
+    seq = open_sequence(res.path)
+    gaps = np.round(np.diff(seq.timestamps) * SMALL.fps).astype(int) - 1
+    assert res.dropped > 0 and np.all((gaps == 0) | (gaps >= 4) | (gaps == res.dropped % 4))
+    mean = np.array([seq.image(i, gray=True).mean() for i in range(len(seq))])
+    assert np.max(np.abs(np.diff(np.log(mean)))) > 0.2                 # brightness steps between frames

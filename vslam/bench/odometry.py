@@ -32,6 +32,8 @@ from odometry.shared.poses import between, compose
 from odometry.tracking import detect_corners, highpass, normalize, track_lk
 from odometry.vo import Reference, VOConfig, VOStatus, run_visual_odometry
 from vslam.app.odometry import fuse_sequence_odometry, parse_overrides
+from vslam.bench import odometry_regimes
+from vslam.bench.docs import publish
 from vslam.bench.results import BenchResult, write_json
 from vslam.evaluation.drift import drift_metrics
 from vslam.evaluation.tables import format_table
@@ -63,6 +65,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(reported separately; 0 to skip)")
     p.add_argument("--data", default=None, help="keep the simulated sequences here and reuse them on later runs")
     p.add_argument("--out", default=None, help="write the results as JSON here")
+    p.add_argument("--regimes", action="store_true",
+                   help="instead: low frame rates, large shifts, turns in place, camera heights 5 cm-100 m, dropped "
+                        "runs, distortion/JPEG/exposure jumps on both renderers, against the naive ORB chain "
+                        "(docs section odometry-regimes)")
+    p.add_argument("--only", default=None, help="with --regimes: only regimes whose name contains this text")
 
 
 # ---------------------------------------------------------------------------------------------------- one run
@@ -328,7 +335,31 @@ def _tables(results, natural, summary, front) -> list[tuple[str, str]]:
     return out
 
 
+def run_regimes_command(args: argparse.Namespace) -> BenchResult:
+    """`--regimes`: the table of odometry_regimes, published into its own docs section."""
+    cv2.setNumThreads(max(1, args.threads))
+    with tempfile.TemporaryDirectory(prefix="vslam-bench-regimes-") as tmp:
+        where = Path(args.data) if args.data else Path(tmp)
+        where.mkdir(parents=True, exist_ok=True)
+        config = VOConfig.from_dict(parse_overrides(args.set), base=VOConfig.preset(args.preset))
+        rows = odometry_regimes.run_regimes(where, args.only, config)
+    checks = odometry_regimes.targets(rows)
+    md = odometry_regimes.table(rows) + "\n\ntargets: " + ", ".join(f"{k} {'met' if v else 'NOT met'}"
+                                                                     for k, v in checks.items())
+    print("\n" + md)
+    if args.out:
+        write_json(args.out, {"benchmark": "odometry-regimes", "rows": rows, "targets": checks})
+    if not args.only:
+        note = publish("odometry-regimes", md, "vslam bench odometry --regimes", getattr(args, "docs", None),
+                       getattr(args, "docs_file", None))
+        if note:
+            print(note)
+    return BenchResult(None)
+
+
 def run(args: argparse.Namespace) -> BenchResult:
+    if getattr(args, "regimes", False):
+        return run_regimes_command(args)
     if args.frames < 50:
         raise ValueError("--frames must be at least 50")
     overrides = parse_overrides(args.set)

@@ -42,6 +42,9 @@ class Effects(Config):
     tilt_wobble: float = setting(0.004, range="[0, inf)", unit="rad", doc="about 0.2 deg")
     dropped_frames: float = setting(0.0, range="[0, 1]", doc="probability per frame")
     corrupt_frames: float = setting(0.0, range="[0, 1]", doc="probability per frame")
+    dropped_run: int = setting(1, range="[1, inf)", doc="frames lost at each drop (a run of dropped frames)")
+    exposure_jumps: float = setting(0.0, range="[0, 1]", doc="probability per frame of an auto-exposure step")
+    exposure_jump_size: float = setting(0.5, range="[0, inf)", doc="step of log gain, uniform in +-this")
 
 
 def pixel_to_world_homography(camera: CameraModel, pose: np.ndarray, height: float, tilt: tuple[float, float]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -23,7 +23,7 @@ from vslam.sim.floor import Floor, FloorType
 from vslam.sim.randomness import keyed_rng
 from vslam.sim.render import Effects, FrameRenderer, image_motion
 from vslam.sim.sensors import SensorNoise, gyro_measurements, wheel_measurements
-from vslam.sim.trajectory import TrajectoryKind, curvature_profile, drive
+from vslam.sim.trajectory import TrajectoryKind, curvature_profile, drive, lanes_controls
 
 _P_TRAJ, _P_SENS, _P_FRAME, _P_WOBBLE = 101, 102, 103, 104
 
@@ -52,6 +52,14 @@ class SimConfig(Config):
     effects: Effects = field(default_factory=Effects)
     sensor_noise: SensorNoise = field(default_factory=SensorNoise)
     max_frames: int | None = setting(None, range="[1, inf)")
+    # aerial-like scenes: a camera at 40 m over a floor made of ground-texture photographs at their physical size
+    # would see a grey blur; the scene is magnified instead, so that one texture pixel still covers about one
+    # image pixel (`scene_scale` = camera_height / 0.5 keeps the 0.5 m look at any height)
+    scene_scale: float = setting(1.0, range="(0, inf)",
+                                 doc="floor size relative to its photographs (the view at camera_height / scale)")
+    lanes: int = setting(3, range="[1, inf)", doc="trajectory lanes: number of lanes")
+    lane_spacing: float | None = setting(None, range="(0, inf)", unit="m",
+                                         doc="trajectory lanes: between lanes (default 2/3 of the footprint width)")
 
     def camera(self) -> CameraModel:
         return CameraModel(width=self.width, height=self.height, fx=self.focal, fy=self.focal,
@@ -81,6 +89,10 @@ def length_for_frames(frames: int, fps: float, speed: float, accel: float = 0.5,
 
 def plan_motion(cfg: SimConfig):
     """The controls (and exact poses) of the run."""
+    if TrajectoryKind(cfg.trajectory) == TrajectoryKind.LANES:
+        across = cfg.height * cfg.camera_height / cfg.focal   # footprint across the lanes (image rows)
+        spacing = cfg.lane_spacing if cfg.lane_spacing is not None else 2.0 / 3.0 * across
+        return lanes_controls(cfg.length, spacing, cfg.lanes, cfg.speed, cfg.sensor_rate)
     ds = 0.002
     rng = keyed_rng(cfg.seed, _P_TRAJ)
     kappa = curvature_profile(cfg.trajectory, cfg.length, ds, rng, turn_radius=cfg.turn_radius)
@@ -104,8 +116,13 @@ def simulate(cfg: SimConfig, out_dir: str | Path, overwrite: bool = False,
         n_frames = min(n_frames, cfg.max_frames)
     frame_t = np.arange(n_frames) / cfg.fps
     poses = controls.pose_at(frame_t)
-    floor = Floor(cfg.floor, seed=cfg.seed, resolution=camera.ground_resolution(), gray=cfg.gray)
-    renderer = FrameRenderer(floor, camera, cfg.effects, seed=cfg.seed)
+    k = cfg.scene_scale
+    # the renderer sees the scene shrunk by k: camera height / k over the floor at its photographs' size
+    view_cam = camera if k == 1.0 else replace(camera, camera_height=camera.camera_height / k)
+    floor = Floor(cfg.floor, seed=cfg.seed, resolution=view_cam.ground_resolution(), gray=cfg.gray)
+    renderer = FrameRenderer(floor, view_cam, cfg.effects, seed=cfg.seed)
+    gain = 1.0
+    run_left = 0
     fx = cfg.effects
     wob = keyed_rng(cfg.seed, _P_WOBBLE)
     ph = wob.uniform(0, 2 * math.pi, 4)
@@ -115,19 +132,30 @@ def simulate(cfg: SimConfig, out_dir: str | Path, overwrite: bool = False,
     with SequenceWriter(out_dir, camera, image_ext=ext, overwrite=overwrite, jpeg_quality=cfg.jpeg_quality) as w:
         for i, (t, pose) in enumerate(zip(frame_t, poses)):
             frng = keyed_rng(cfg.seed, _P_FRAME, i)
-            if fx.dropped_frames > 0 and 0 < i < n_frames - 1 and frng.random() < fx.dropped_frames:
+            if run_left > 0 and i < n_frames - 1:
+                run_left -= 1
                 dropped += 1
                 continue
+            if fx.dropped_frames > 0 and 0 < i < n_frames - 1 and frng.random() < fx.dropped_frames:
+                dropped += 1
+                run_left = fx.dropped_run - 1   # a run of dropped frames (a stalled link, a full buffer)
+                continue
+            small = pose if k == 1.0 else np.array([pose[0] / k, pose[1] / k, pose[2]])
             blur = None
             if fx.motion_blur:
                 a, b = controls.pose_at(np.array([t - fx.exposure / 2, t + fx.exposure / 2]))
                 blur = image_motion(camera, a, b)
-            height, tilt = camera.camera_height, (0.0, 0.0)
+            height, tilt = view_cam.camera_height, (0.0, 0.0)
             if fx.wobble:
                 height = height + fx.height_wobble * math.sin(2 * math.pi * 0.37 * t + ph[0])
                 tilt = (fx.tilt_wobble * math.sin(2 * math.pi * 0.53 * t + ph[1]),
                         fx.tilt_wobble * math.sin(2 * math.pi * 0.29 * t + ph[2]))
-            img = renderer.render(pose, float(t), blur_px=blur, height=height, tilt=tilt, rng=frng)
+            img = renderer.render(small, float(t), blur_px=blur, height=height, tilt=tilt, rng=frng)
+            if fx.exposure_jumps > 0 and i > 0 and frng.random() < fx.exposure_jumps:
+                # auto-exposure stepping: the whole image brighter or darker from this frame on
+                gain = float(np.clip(gain * math.exp(frng.uniform(-1, 1) * fx.exposure_jump_size), 0.3, 3.0))
+            if gain != 1.0:
+                img = np.clip(img.astype(np.float32) * gain + 0.5, 0, 255).astype(np.uint8)
             if fx.corrupt_frames > 0 and 0 < i < n_frames - 1 and frng.random() < fx.corrupt_frames:
                 # a truncated file with garbage: what a failing SD card or transfer leaves behind
                 junk = frng.integers(0, 256, 2048, dtype=np.uint8).tobytes()

@@ -20,6 +20,7 @@ class TrajectoryKind(str, enum.Enum):
     FIGURE8 = "figure8"        # closed figure-eight
     LAWNMOWER = "lawnmower"    # back-and-forth rows, then a pass across them (revisits)
     RANDOM = "random"          # smooth random walk within a bounded area
+    LANES = "lanes"            # survey lanes flown in alternating directions, joined by turns in place
 
 
 @dataclass(frozen=True)
@@ -165,6 +166,44 @@ def drive(kappa: np.ndarray, ds: float, speed: float, rate: float, accel: float 
     for _ in range(int(end_pause * rate)):
         v_out.append(0.0)
         w_out.append(0.0)
+    v_arr, w_arr = np.asarray(v_out), np.asarray(w_out)
+    times = np.arange(len(v_arr) + 1) * dt
+    return Controls(t=times, v=v_arr, omega=w_arr, poses=integrate_arcs(v_arr, w_arr, dt))
+
+
+def lanes_controls(length: float, spacing: float, n_lanes: int, speed: float, rate: float, turn_rate: float = 1.2,
+                   pause: float = 0.5) -> Controls:
+    """Parallel lanes flown in alternating directions (a survey pattern): along a lane at `speed`, then a 90 degree
+    turn in place, `spacing` metres across, another 90 degree turn in place (180 degrees in all), the next lane.
+    Lane length: what is left of `length` after the crossings, shared by the lanes. Controls at `rate` Hz."""
+    if n_lanes < 1 or spacing <= 0 or speed <= 0:
+        raise ValueError("lanes need n_lanes >= 1, spacing > 0 and speed > 0")
+    lane = (length - (n_lanes - 1) * spacing) / n_lanes
+    if lane <= 0:
+        raise ValueError(f"path length {length} m is too short for {n_lanes} lanes {spacing} m apart")
+    dt = 1.0 / rate
+    steps: list[tuple[float, float, float]] = [(0.0, 0.0, pause)]   # (v, omega, duration)
+    for k in range(n_lanes):
+        steps.append((speed, 0.0, lane / speed))
+        if k < n_lanes - 1:
+            turn = 1.0 if k % 2 == 0 else -1.0   # left, then right: lanes alternate in direction
+            steps += [(0.0, turn * turn_rate, math.pi / 2 / turn_rate), (speed, 0.0, spacing / speed),
+                      (0.0, turn * turn_rate, math.pi / 2 / turn_rate)]
+    steps.append((0.0, 0.0, pause))
+    v_out, w_out = [], []
+    carry = 0.0
+    for v, w, dur in steps:
+        # whole control intervals; the remainder carries over so that distances and angles stay exact
+        n = int(math.floor((dur + carry) / dt + 1e-9))
+        frac = (dur + carry) / dt - n
+        v_out += [v] * n
+        w_out += [w] * n
+        carry = frac * dt
+        if carry > 1e-12 and len(v_out) > 0:
+            # the remainder as one shortened-rate interval: same distance/angle over a full dt
+            v_out.append(v * carry / dt)
+            w_out.append(w * carry / dt)
+            carry = 0.0
     v_arr, w_arr = np.asarray(v_out), np.asarray(w_out)
     times = np.arange(len(v_arr) + 1) * dt
     return Controls(t=times, v=v_arr, omega=w_arr, poses=integrate_arcs(v_arr, w_arr, dt))
