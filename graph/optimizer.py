@@ -13,6 +13,7 @@ from graph.errors import GraphError
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult
+from graph.robust import robust_solve
 from graph.thresholds import loop_thresholds
 
 
@@ -24,7 +25,11 @@ def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: 
     if data.num_nodes == 0:
         raise GraphError("the pose graph has no nodes")
     if params.solver == Solver.ISAM2:
-        return incremental.full_pass(data, params)
+        # the incremental pass gates loops on arrival and classifies them with its own GNC
+        inc = params.replace(robust=RobustMode.GNC) if params.robust == RobustMode.CONSENSUS else params
+        return incremental.full_pass(data, inc)
+    if params.robust == RobustMode.CONSENSUS:
+        return robust_solve(data, params)
     if params.robust != RobustMode.NONE and params.gate_loops and data.num_loops:
         t0 = time.perf_counter()
         try:
