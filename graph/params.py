@@ -124,7 +124,7 @@ class GraphParams(Config):
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")
-    odometry_start: bool = setting(False, doc="also run GNC from the odometry chain; keep the lower TLS objective")
+    odometry_start: bool = setting(True, doc="also run GNC from the odometry chain; keep the lower TLS objective")
     cluster_weights: bool = setting(False, doc="one GNC weight per cluster of agreeing loops instead of per loop")
     huber_k: float = setting(1.345, range="(0, inf)", doc="kernel width on the whitened residual norm")
     cauchy_k: float = setting(1.0, range="(0, inf)")

@@ -19,7 +19,7 @@ import gtsam
 import numpy as np
 from scipy.stats import chi2
 
-from graph.batch import build, initial_guess, lm_params
+from graph.batch import build, initial_guess, lm_params, resolve_init
 from graph.factors import array_from_values, graph_of, squared_residuals, values_from_array
 from graph.gnc import tls_weights
 from graph.model import TANGENT_DIM, PoseGraphData
@@ -102,8 +102,8 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     starts = [("odometry", values_from_array(data.dim, initial_guess(data, built, InitMethod.ODOMETRY)))]
     if not params.odometry_start:
         starts = []
-    method = InitMethod.LAGO if data.dim == 2 else InitMethod.CHORDAL
-    if supported.any():
+    method = resolve_init(data, params.replace(robust="none"))     # AUTO: LAGO (2D) / chordal (3D)
+    if supported.any() or method == InitMethod.GIVEN:
         try:
             guess = initial_guess(data, built.subset(supported), method)
             v, _ = _lm(built.graph(supported), values_from_array(data.dim, guess), params, params.lm_max_iterations)
