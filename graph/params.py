@@ -116,9 +116,10 @@ class GraphParams(Config):
     support_probability: float = setting(0.99, range="(0, 1)", unit="probability",
                                          doc="chi-square quantile of that cycle test")
     calibration_margin: float = setting(10.0, range="[0, inf)", unit="x variance factor",
-                                        doc="loop thresholds = chi-square quantile x min(1, this x the variance "
-                                            "factor of the agreeing cycles (graph.support): residual tails of real "
-                                            "graphs are heavier than chi-square")
+                                        doc="loop thresholds = chi-square quantile x this x the variance factor of "
+                                            "the agreeing cycles (graph.support; public graphs state noise 10-1000x "
+                                            "too loose, the pipeline's loop poses ~2x too tight); the margin because "
+                                            "residual tails of real graphs are heavier than chi-square")
     calibration_min_loops: int = setting(10, range="[1, inf)", unit="cycles",
                                          doc="calibrate only with at least this many agreeing cycles")
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",

@@ -114,7 +114,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         # variance factor from the agreeing cycles: their median error over the chi-square median. Local, so
         # neither drift nor a false loop bending the map (both inflate a global a-posteriori estimate) enter it
         sigma0 = float(np.median(pairs[2])) / float(chi2.ppf(0.5, dof))
-        scale = min(1.0, params.calibration_margin * sigma0)
+        scale = params.calibration_margin * sigma0
         c2 = c2 * scale
         notes.append(f"variance factor {sigma0:.3g}: thresholds x {scale:.3g}")
     init_seconds = time.perf_counter() - t0

@@ -107,7 +107,16 @@ class RobustPoseGraph:
 
     def result(self, warm_start: bool = False) -> GraphResult:
         """The final solve: every loop classified. warm_start (batch): start from the current guesses."""
-        if self._inc is not None:
+        if self._inc is not None and self.params.robust == RobustMode.CONSENSUS:
+            # the final labels come from the batch consensus solve started at the iSAM2 estimate: the online gate
+            # tests loops against the drifted estimate at their arrival and rejects true loops under large drift
+            online = self._inc.result(classify=False)
+            data = self._inc.to_data()
+            data.poses = online.poses
+            res = optimize(data, self.params.replace(solver=Solver.LM, init=InitMethod.GIVEN))
+            res.seconds += online.seconds
+            res.notes.insert(0, f"iSAM2 pass {online.seconds:.3f} s, then the batch consensus solve from it")
+        elif self._inc is not None:
             res = self._inc.result(classify=True)
         else:
             data = self._batch.to_data()
