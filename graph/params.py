@@ -125,6 +125,11 @@ class GraphParams(Config):
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")
+    trial_max_loops: int = setting(50, range="[0, inf)", unit="loops",
+                                   doc="up to this many unsupported loops are tried jointly in a GNC from the solution "
+                                       "(a lone true loop under drift fits only once the map moves to it); more are "
+                                       "only tested at the solution: long-range loops in every inner solve cost "
+                                       "minutes on 10^4-node graphs")
     odometry_start: bool = setting(True, doc="also run GNC from the odometry chain; keep the lower TLS objective")
     cluster_weights: bool = setting(False, doc="one GNC weight per cluster of agreeing loops instead of per loop")
     huber_k: float = setting(1.345, range="(0, inf)", doc="kernel width on the whitened residual norm")

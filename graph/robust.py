@@ -141,6 +141,19 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     # 4. polish; then admit every loop that fits its threshold at the solution, re-solve, until none is added
     values, it = _lm(built.graph(inlier), values, params, params.lm_max_iterations)
     iters += it
+    trial = ~cand
+    if 0 < trial.sum() <= params.trial_max_loops:
+        # few unsupported loops (a lone loop closing a long drift): judge them by a GNC that includes them, so
+        # the map can move to them; a test at a solution without them would see the drift as their residual
+        pool = inlier | trial
+        sub = built.subset(pool)
+        v, kept, outer, it = gnc_tls(base, sub.loops, values, c2[pool], np.arange(int(pool.sum())), params)
+        iters += it
+        new_inlier = np.zeros(L, bool)
+        new_inlier[pool] = kept
+        if tls_objective(base_graph, built.loops, v, c2) <= tls_objective(base_graph, built.loops, values, c2):
+            values, inlier = v, new_inlier
+            notes.append(f"{int(trial.sum())} unsupported loops tried jointly: {int((kept & trial[pool]).sum())} kept")
     for _ in range(params.readmit_rounds):
         r2 = squared_residuals(built.loops, values)
         readmit = ~inlier & (r2 <= c2)
