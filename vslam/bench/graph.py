@@ -19,8 +19,10 @@ Tuning / reporting split: the defaults of the robust method were chosen on the t
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -51,6 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--peer-max-nodes", type=int, default=4000,
                    help="run gtsam-gnc and plain-lm on contaminated graphs only up to this many nodes (gtsam's GNC "
                         "restarts every inner solve: minutes per row on 10^4 nodes)")
+    p.add_argument("--from-json", help="comma-separated JSON files of earlier runs: print (and publish) their tables "
+                                       "together instead of solving (runs split over processes)")
     p.add_argument("--out", default="bench-results/graph.json", help="JSON output path (rewritten after each graph)")
 
 
@@ -175,7 +179,27 @@ def tables(heads: list[dict], rows: list[dict], methods: list[str]) -> str:
     return "\n\n".join(lines)
 
 
+def merged(paths: list[str]) -> BenchResult:
+    """The tables of earlier runs' JSON files, one section (graphs in file order)."""
+    heads, rows, setups = [], [], []
+    for path in paths:
+        d = json.loads(Path(path).read_text())
+        heads += d["graphs"]
+        rows += d["rows"]
+        setups.append(f"- {', '.join(g['graph'] for g in d['graphs'])}: policies {', '.join(d['policies'])}; false "
+                      f"loops {', '.join(str(int(round(100 * f))) for f in d['fractions'])} %; seeds "
+                      f"{', '.join(map(str, d['seeds']))}; methods {', '.join(d['methods'])}"
+                      + ("" if not d.get("partial") else " (partial run)"))
+    text = ("Runs merged (`--from-json`):\n\n" + "\n".join(setups) + f"\n\nTuning half: graphs "
+            f"{', '.join(TUNING_GRAPHS)} with seed(s) {', '.join(map(str, TUNING_SEEDS))}; everything else reports.\n\n"
+            + tables(heads, rows, []))
+    print(text)
+    return BenchResult(text)
+
+
 def run(args: argparse.Namespace) -> BenchResult:
+    if args.from_json:
+        return merged([p.strip() for p in args.from_json.split(",") if p.strip()])
     sel, policies, fractions, seeds, methods = _selection(args)
     t0 = time.perf_counter()
     heads, rows, skipped = [], [], []
