@@ -98,7 +98,10 @@ class RobustPoseGraph:
         return self._estimate
 
     def loop_inliers(self) -> np.ndarray:
-        """Current inlier flag of each loop (iSAM2: its online gate and kernel; batch: the last solve)."""
+        """Current inlier flag of each loop: the last `result()` while no loop was added since; else iSAM2's online
+        gate and kernel (batch: every loop, until the first solve)."""
+        if self._result is not None and len(self._result.loop_inlier) == self.num_loops:
+            return np.asarray(self._result.loop_inlier, bool)
         if self._inc is not None:
             return self._inc.loop_inliers()
         if self._result is None:
