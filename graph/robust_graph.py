@@ -118,6 +118,7 @@ class RobustPoseGraph:
             data.poses = online.poses
             res = optimize(data, self.params.replace(solver=Solver.LM, init=InitMethod.GIVEN))
             res.seconds += online.seconds
+            res.solver = Solver.ISAM2.value            # the strategy that produced the online estimates
             res.notes.insert(0, f"iSAM2 pass {online.seconds:.3f} s, then the batch consensus solve from it")
         elif self._inc is not None:
             res = self._inc.result(classify=True)
