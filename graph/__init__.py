@@ -1,14 +1,14 @@
 """GTSAM pose-graph back end: odometry and loop factors, robust loop handling, LAGO / LM / iSAM2, g2o and TORO I/O.
 
-    from graph import PoseGraph, GraphParams
-    g = PoseGraph()                                   # planar; PoseGraph(dim=3) for Pose3
+    from graph import RobustPoseGraph, GraphParams
+    g = RobustPoseGraph()                             # planar; dim=3 for Pose3; strategy="isam2" for online use
     g.add_node(0, [0, 0, 0]); g.add_node(1)
     g.add_odometry(0, 1, [1, 0, 0.1], cov)            # delta = x_0^-1 x_1, cov 3x3 in (x, y, theta)
     k = g.add_loop(1, 0, delta, cov, probability=0.95)
-    res = g.optimize()                                # res.poses (N, 3), res.loop_inlier[k], res.summary()
+    ids, poses = g.update()                           # current estimate (batch: robust solve; iSAM2: insert)
+    res = g.result()                                  # res.poses (N, 3), res.loop_inlier[k], res.summary()
 
-`IncrementalPoseGraph` has the same add_* calls on iSAM2, `estimate()` / `pose(id)` on demand and
-`classify_loops()`. `read_graph` / `write_graph` read and write g2o and TORO files; `optimize(data, params)`
+`RobustPoseGraph` is the front door; `PoseGraph` (batch) and `IncrementalPoseGraph` (iSAM2) are its strategies. `read_graph` / `write_graph` read and write g2o and TORO files; `optimize(data, params)`
 solves a `PoseGraphData`. See docs/graph.md for the design and the measurements behind the defaults.
 """
 from graph.formats import (
@@ -28,8 +28,9 @@ from graph.outliers import LoopScores, inject_false_loops, loop_scores
 from graph.params import GncImpl, GncLoss, GraphParams, InitMethod, LoopWeighting, RobustMode, Solver
 from graph.pose_graph import PoseGraph
 from graph.result import GraphResult, write_g2o, write_tum
+from graph.robust_graph import RobustPoseGraph
 
 __all__ = ["GncImpl", "GncLoss", "GraphFormatError", "GraphParams", "GraphResult", "IncrementalPoseGraph",
-           "InitMethod", "LoopScores", "LoopWeighting", "PoseGraph", "PoseGraphData", "RobustMode", "Solver",
+           "InitMethod", "LoopScores", "LoopWeighting", "PoseGraph", "PoseGraphData", "RobustMode", "RobustPoseGraph", "Solver",
            "classify_edges", "format_g2o", "format_toro", "inject_false_loops", "loop_scores", "optimize",
            "read_g2o", "read_graph", "read_toro", "write_g2o", "write_graph", "write_toro", "write_tum"]

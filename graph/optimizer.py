@@ -15,6 +15,7 @@ from graph.factors import anchor_nodes
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult
+from graph.robust import robust_solve
 from graph.thresholds import loop_thresholds
 
 
@@ -56,7 +57,11 @@ def _first_line(exc: BaseException) -> str:
 
 def _optimize(data: PoseGraphData, params: GraphParams) -> GraphResult:
     if params.solver == Solver.ISAM2:
-        return incremental.full_pass(data, params)
+        # the incremental pass gates loops on arrival and classifies them with its own GNC
+        inc = params.replace(robust=RobustMode.GNC) if params.robust == RobustMode.CONSENSUS else params
+        return incremental.full_pass(data, inc)
+    if params.robust == RobustMode.CONSENSUS:
+        return robust_solve(data, params)
     if params.robust != RobustMode.NONE and params.gate_loops and data.num_loops and loops_join_odometry_parts(data):
         res = solve(data, params)
         res.notes.insert(0, "loops are the only link between parts of the odometry chain: solved without the gate")

@@ -13,7 +13,8 @@ from odometry.shared.config import Config, setting
 class RobustMode(str, enum.Enum):
     """How loop closures are protected against false positives (odometry is always trusted)."""
 
-    GNC = "gnc"          # graduated non-convexity (truncated least squares), odometry as known inliers
+    CONSENSUS = "consensus"   # local cycle consistency, then GNC-TLS over the supported loops (graph.robust; default)
+    GNC = "gnc"          # gate + graduated non-convexity (truncated least squares), odometry as known inliers
     HUBER = "huber"      # Huber M-estimator on loop factors
     CAUCHY = "cauchy"    # Cauchy M-estimator on loop factors
     NONE = "none"        # plain least squares
@@ -58,7 +59,7 @@ class GraphParams(Config):
     fields; strings are accepted for enum fields."""
 
     PRESETS = {
-        # GNC-TLS loops, LM batch; the choice measured in `vslam bench graph` (docs/graph.md)
+        # local consensus + GNC-TLS, LM batch; the choice measured in `vslam bench graph` (docs/graph.md)
         "default": {},
         # fewer iterations and a coarser GNC schedule: for previews and very large graphs
         "fast": {"lm_max_iterations": 30, "lm_relative_tol": 1e-4, "gnc_mu_step": 2.0, "gnc_max_iterations": 40,
@@ -71,7 +72,7 @@ class GraphParams(Config):
     }
 
     solver: Solver = Solver.LM
-    robust: RobustMode = RobustMode.GNC
+    robust: RobustMode = RobustMode.CONSENSUS
     init: InitMethod = InitMethod.AUTO
     # --- batch Levenberg-Marquardt
     lm_max_iterations: int = setting(100, range="[1, inf)")
@@ -109,6 +110,28 @@ class GraphParams(Config):
                                     doc="propose re-admitting rejected loops within this factor of their threshold")
     isolation_max_tests: int = setting(50, range="[0, inf)",
                                        doc="at most this many per round (largest r^2 / threshold first)")
+    support_window: int = setting(10, range="[0, inf)", unit="nodes",
+                                  doc="loops whose both ends are within this many nodes are tested for agreement "
+                                      "over the short odometry cycle between them (graph.support); 0: off")
+    support_probability: float = setting(0.99, range="(0, 1)", unit="probability",
+                                         doc="chi-square quantile of that cycle test")
+    calibration_margin: float = setting(10.0, range="[0, inf)", unit="x variance factor",
+                                        doc="loop thresholds = chi-square quantile x this x the variance factor of "
+                                            "the agreeing cycles (graph.support; public graphs state noise 10-1000x "
+                                            "too loose, the pipeline's loop poses ~2x too tight); the margin because "
+                                            "residual tails of real graphs are heavier than chi-square")
+    calibration_min_loops: int = setting(10, range="[1, inf)", unit="cycles",
+                                         doc="calibrate only with at least this many agreeing cycles")
+    readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
+                                  doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
+                                      "at most this many times")
+    trial_max_loops: int = setting(50, range="[0, inf)", unit="loops",
+                                   doc="up to this many unsupported loops are tried jointly in a GNC from the solution "
+                                       "(a lone true loop under drift fits only once the map moves to it); more are "
+                                       "only tested at the solution: long-range loops in every inner solve cost "
+                                       "minutes on 10^4-node graphs")
+    odometry_start: bool = setting(True, doc="also run GNC from the odometry chain; keep the lower TLS objective")
+    cluster_weights: bool = setting(False, doc="one GNC weight per cluster of agreeing loops instead of per loop")
     huber_k: float = setting(1.345, range="(0, inf)", doc="kernel width on the whitened residual norm")
     cauchy_k: float = setting(1.0, range="(0, inf)")
     loop_weighting: LoopWeighting = LoopWeighting.THRESHOLD

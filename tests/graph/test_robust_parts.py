@@ -55,7 +55,7 @@ def test_loop_scores():
 
 
 def test_params_presets_and_validation():
-    assert GraphParams.preset("default").robust.value == "gnc"
+    assert GraphParams.preset("default").robust.value == "consensus"
     assert GraphParams.preset("fast").lm_max_iterations < GraphParams.preset("default").lm_max_iterations
     assert GraphParams.preset("robust_strict").inlier_probability < GraphParams.preset("default").inlier_probability
     assert GraphParams.preset("default").replace(robust="huber", solver="isam2").solver.value == "isam2"

@@ -21,8 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                    "information matrices and comments.")
     o.add_argument("input", metavar="IN", help="g2o or TORO file")
     o.add_argument("--out", required=True, metavar="OUT", help="output graph (.g2o, or .graph for TORO)")
-    o.add_argument("--robust", choices=("gnc", "huber", "cauchy", "none"), default=None,
-                   help="loop outlier handling (default: the preset's, gnc)")
+    o.add_argument("--robust", choices=("consensus", "gnc", "huber", "cauchy", "none"), default=None,
+                   help="loop outlier handling (default: the preset's, consensus; gnc: the previous arrival gate + GNC)")
     o.add_argument("--solver", choices=("lm", "isam2"), default=None, help="batch LM or an iSAM2 pass (default lm)")
     o.add_argument("--init", choices=("auto", "lago", "odometry", "chordal", "given"), default=None,
                    help="initial guess for LM (default auto: LAGO / chordal without robust mode, else odometry)")

@@ -22,7 +22,7 @@ from odometry.shared.pose_covariance import compose_with_covariance
 from odometry.shared.poses import between, compose
 from odometry.vo import VisualOdometry, VOEstimate, VOStatus
 from vslam.errors import VslamError
-from vslam.pipeline.backend import IncrementalBuilder, PoseGraphBuilder
+from vslam.pipeline.backend import backend_graph, floored
 from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import loop_pose
 from vslam.pipeline.outputs import write_outputs
@@ -121,7 +121,7 @@ class Pipeline:
         self.camera = camera
         self.vo = VisualOdometry(camera, cfg.vo)
         self.loop_detector = build_loop_detector(cfg, camera)
-        self.graph = IncrementalBuilder(cfg.graph) if cfg.incremental else PoseGraphBuilder(cfg.graph)
+        self.graph = backend_graph(cfg.graph, cfg.incremental)
         self.rng = np.random.default_rng(cfg.seed)
         self.timestamps: list[float] = []
         self.poses_vo: list[np.ndarray] = []
@@ -213,7 +213,7 @@ class Pipeline:
             self.keyframes.append(index)
             self.kf_slam.append(guess)
             self.graph.add_node(index, guess)
-            self.graph.add_odometry(prev, index, between(self.poses_vo[prev], self.poses_vo[index]), cov)
+            self.graph.add_odometry(prev, index, between(self.poses_vo[prev], self.poses_vo[index]), floored(cov))
         else:
             self.keyframes.append(index)
             self.kf_slam.append(self.poses_vo[index].copy())
@@ -246,8 +246,8 @@ class Pipeline:
                                lc.min_pose_inliers, lc.pose_pixel_sigma, self.rng)
                 if lp is not None:
                     rec.delta, rec.covariance, rec.pose_inliers = lp.delta, lp.covariance, lp.n_inliers
-                    rec.loop_index = self.graph.add_loop(rec.match_frame, rec.query_frame, lp.delta, lp.covariance,
-                                                         rec.probability)
+                    rec.loop_index = self.graph.add_loop(rec.match_frame, rec.query_frame, lp.delta,
+                                                         floored(lp.covariance), rec.probability)
                     self.graph_loops.append(rec)
                     self._new_loops += 1
             out.append(rec)
@@ -258,7 +258,7 @@ class Pipeline:
         """Batch: re-solve after `optimize_every` new loops (and at the end). Incremental: an iSAM2 update whenever
         loops arrived (nodes alone are batched by the back end), then the current estimate."""
         if force:
-            self._apply(self.graph.optimize(warm_start=False))
+            self._apply(self.graph.result(warm_start=False))
             self._new_loops = 0
             return
         if self._new_loops == 0:
@@ -282,7 +282,7 @@ class Pipeline:
         if every <= 0 or self._new_loops < every:
             return
         self.graph.set_guesses(np.asarray(self.kf_slam))
-        self._apply(self.graph.optimize(warm_start=True))
+        self._apply(self.graph.result(warm_start=True))
         self._new_loops = 0
 
     def _apply(self, res) -> None:
@@ -312,7 +312,7 @@ class Pipeline:
         timings["final_optimisation"] = np.array([t_final])
         return PipelineResult(config=self.config, camera=self.camera, timestamps=np.asarray(self.timestamps),
                               poses_vo=np.asarray(self.poses_vo).reshape(-1, 3), poses_slam=slam,
-                              keyframes=np.asarray(self.keyframes, int), loops=self.loops, graph=self.graph.data(),
+                              keyframes=np.asarray(self.keyframes, int), loops=self.loops, graph=self.graph.to_data(),
                               graph_result=self.last_result, timings=timings, vo_status=np.asarray(self.vo_status),
                               vo_inliers=np.asarray(self.vo_inliers), descriptor_bytes=np.asarray(self.descriptor_bytes),
                               similarity=self.similarity)

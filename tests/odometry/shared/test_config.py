@@ -81,7 +81,7 @@ def test_types_are_checked_with_the_dotted_key(tmp_path):
         "loops: {model: 3}": "loops.model: expected a string, got 3",
         "loops: {database: 5}": "loops.database: expected a mapping of DatabaseParams settings, got 5",
         "graph: {isam2_factorization: lu}": "graph: isam2_factorization must be one of cholesky, qr, got 'lu'",
-        "graph: {robust: maybe}": "graph.robust: 'maybe' is not one of gnc, huber, cauchy, none",
+        "graph: {robust: maybe}": "graph.robust: 'maybe' is not one of consensus, gnc, huber, cauchy, none",
         "keyframes: {max_frames: 2.5}": "keyframes.max_frames: expected an integer, got 2.5",
     }
     for text, message in cases.items():

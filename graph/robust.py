@@ -1,0 +1,173 @@
+"""The robust batch solve: local consistency, then graduated non-convexity over clusters of loops.
+
+1. support (`graph.support`): loops agreeing with a nearby loop over a short odometry cycle are grouped into
+   clusters (connected components); a loop without support is its own cluster. Drift does not enter this test.
+2. start: least squares on odometry + the supported loops, initialised by LAGO (2D) / chordal (3D) on that subset,
+   so the start already carries the loop corrections however large the drift was (a start from the drifted
+   odometry chain makes every true loop look like an outlier: ring, 8 m of drift).
+3. GNC with truncated least squares (Yang et al. 2020), odometry and anchor as known inliers, one weight per
+   cluster: a cluster's squared residual is the sum over its loops, its threshold the sum of their chi-square
+   thresholds. A group of mutually consistent false loops is thus one hypothesis that the rest of the map accepts
+   or rejects as a whole. Inner solves are warm-started (a few LM iterations per step).
+4. polish with the kept loops, then re-admit every rejected loop that fits its own threshold at the solution.
+"""
+from __future__ import annotations
+
+import time
+
+import gtsam
+import numpy as np
+from scipy.stats import chi2
+
+from graph.batch import build, initial_guess, lm_params, resolve_init
+from graph.factors import array_from_values, graph_of, squared_residuals, values_from_array
+from graph.gnc import tls_weights
+from graph.model import TANGENT_DIM, PoseGraphData
+from graph.params import GraphParams, InitMethod
+from graph.result import GraphResult
+from graph.support import clusters, loop_support
+from graph.thresholds import loop_thresholds
+
+
+def _weighted(base_factors: list, loops: list, weights: np.ndarray) -> gtsam.NonlinearFactorGraph:
+    g = graph_of(base_factors)
+    for f, w in zip(loops, weights.tolist()):
+        if w >= 1.0 - 1e-9:
+            g.add(f)
+        elif w > 1e-9:
+            r = np.asarray(f.noiseModel().R(), float)
+            g.add(f.cloneWithNewNoiseModel(gtsam.noiseModel.Gaussian.SqrtInformation(np.sqrt(w) * r)))
+    return g
+
+
+def _lm(graph, values, params: GraphParams, iterations: int):
+    p = lm_params(params, iterations)
+    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, p)
+    return opt.optimize(), int(opt.iterations())
+
+
+def gnc_tls(base: list, loops: list, values: gtsam.Values, c2: np.ndarray, label: np.ndarray,
+            params: GraphParams) -> tuple[gtsam.Values, np.ndarray, int, int]:
+    """GNC-TLS from `values` with one weight per label (cluster); returns (values, inlier per loop, outer steps,
+    LM iterations). Odometry + anchor (`base`) are known inliers."""
+    L = len(loops)
+    n_cl = int(label.max()) + 1 if L else 0
+    c2_cl = np.bincount(label, weights=c2, minlength=n_cl) if L else np.zeros(0)
+    weights = np.ones(n_cl)
+    outer = iters = 0
+    if not L:
+        return values, np.zeros(0, bool), 0, 0
+    r2_cl = np.bincount(label, weights=squared_residuals(loops, values), minlength=n_cl)
+    excess = 2.0 * r2_cl - c2_cl
+    if np.any(r2_cl > c2_cl):
+        pos = excess > 0
+        mu = max(float(np.min(c2_cl[pos] / excess[pos])), 1e-6)
+        for outer in range(1, params.gnc_max_iterations + 1):
+            new_w = tls_weights(r2_cl, c2_cl, mu)
+            values, it = _lm(_weighted(base, loops, new_w[label]), values, params, params.gnc_inner_iterations)
+            iters += it
+            r2_cl = np.bincount(label, weights=squared_residuals(loops, values), minlength=n_cl)
+            change = float(np.max(np.abs(new_w - weights)))
+            weights = new_w
+            tol = params.gnc_weights_tol
+            if bool(np.all((weights < tol) | (weights > 1 - tol))) and change < tol:
+                break
+            mu *= params.gnc_mu_step
+    return values, (weights > 0.5)[label], outer, iters
+
+
+def tls_objective(base_graph: gtsam.NonlinearFactorGraph, loops: list, values: gtsam.Values,
+                  c2: np.ndarray) -> float:
+    """The truncated-least-squares objective: cost(anchor + odometry) + sum over loops of min(r^2, c^2) / 2."""
+    return float(base_graph.error(values)) + 0.5 * float(np.minimum(squared_residuals(loops, values), c2).sum())
+
+
+def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
+    t_start = time.perf_counter()
+    built = build(data, params.replace(robust="none"))
+    L = len(built.loops)
+    dof = TANGENT_DIM[data.dim]
+    c2 = loop_thresholds(data.probability[built.loop_idx], dof, params)
+    notes: list[str] = []
+    base = built.priors + built.odometry
+    base_graph = graph_of(base)
+    t0 = time.perf_counter()
+    # 1. local consistency
+    pairs = loop_support(data, params.support_window, float(chi2.ppf(params.support_probability, dof)))
+    label = clusters(L, pairs[0], pairs[1]) if (L and params.cluster_weights) else np.arange(L)
+    supported = np.zeros(L, bool)
+    supported[pairs[0]] = True
+    supported[pairs[1]] = True
+    # 2. starts: the odometry chain; least squares on the supported loops from LAGO / chordal
+    starts = [("odometry", values_from_array(data.dim, initial_guess(data, built, InitMethod.ODOMETRY)))]
+    if not params.odometry_start:
+        starts = []
+    method = resolve_init(data, params.replace(robust="none"))     # AUTO: LAGO (2D) / chordal (3D)
+    if supported.any() or method == InitMethod.GIVEN:
+        try:
+            guess = initial_guess(data, built.subset(supported), method)
+            v, _ = _lm(built.graph(supported), values_from_array(data.dim, guess), params, params.lm_max_iterations)
+            starts.append(("supported loops", v))
+        except RuntimeError:
+            notes.append("LAGO / chordal start on the supported loops failed")
+    if params.calibrate_noise and len(pairs[2]) >= params.calibration_min_loops:
+        # variance factor from the agreeing cycles: their median error over the chi-square median. Local, so
+        # neither drift nor a false loop bending the map (both inflate a global a-posteriori estimate) enter it
+        sigma0 = float(np.median(pairs[2])) / float(chi2.ppf(0.5, dof))
+        scale = params.calibration_margin * sigma0
+        c2 = c2 * scale
+        notes.append(f"variance factor {sigma0:.3g}: thresholds x {scale:.3g}")
+    init_seconds = time.perf_counter() - t0
+    if not starts:
+        starts.append(("odometry", values_from_array(data.dim, initial_guess(data, built, InitMethod.ODOMETRY))))
+    initial_cost = float(built.graph().error(starts[0][1]))
+    best = None
+    iters = 0
+    # GNC over the supported loops only: an unsupported loop is tested once the map is solved (step 4). This keeps
+    # random long-range loops out of every inner solve (their fill-in is what makes a joint solve slow)
+    cand = supported if params.support_window > 0 else np.ones(L, bool)
+    sub = built.subset(cand)
+    _, sub_label = np.unique(label[cand], return_inverse=True)
+    for name, v0 in starts:
+        values, kept, outer, it = gnc_tls(base, sub.loops, v0, c2[cand], sub_label, params)
+        iters += it
+        inlier = np.zeros(L, bool)
+        inlier[cand] = kept
+        f = tls_objective(base_graph, sub.loops, values, c2[cand])
+        notes.append(f"start {name}: GNC {outer} steps, TLS objective {f:.6g}, {int(kept.sum())} loops kept")
+        if best is None or f < best[0]:
+            best = (f, values, inlier)
+    _, values, inlier = best
+    # 4. polish; then admit every loop that fits its threshold at the solution, re-solve, until none is added
+    values, it = _lm(built.graph(inlier), values, params, params.lm_max_iterations)
+    iters += it
+    trial = ~cand
+    if 0 < trial.sum() <= params.trial_max_loops:
+        # few unsupported loops (a lone loop closing a long drift): judge them by a GNC that includes them, so
+        # the map can move to them; a test at a solution without them would see the drift as their residual
+        pool = inlier | trial
+        sub = built.subset(pool)
+        v, kept, outer, it = gnc_tls(base, sub.loops, values, c2[pool], np.arange(int(pool.sum())), params)
+        iters += it
+        new_inlier = np.zeros(L, bool)
+        new_inlier[pool] = kept
+        if tls_objective(base_graph, built.loops, v, c2) <= tls_objective(base_graph, built.loops, values, c2):
+            values, inlier = v, new_inlier
+            notes.append(f"{int(trial.sum())} unsupported loops tried jointly: {int((kept & trial[pool]).sum())} kept")
+    for _ in range(params.readmit_rounds):
+        r2 = squared_residuals(built.loops, values)
+        readmit = ~inlier & (r2 <= c2)
+        if not readmit.any():
+            break
+        inlier = inlier | readmit
+        values, it = _lm(built.graph(inlier), values, params, params.lm_max_iterations)
+        iters += it
+        notes.append(f"admitted {int(readmit.sum())} loops that fit at the solution")
+    r2 = squared_residuals(built.loops, values)
+    final_cost = float(built.graph(inlier).error(values))
+    notes.append(f"support: {int(supported.sum())} of {L} loops")
+    poses = array_from_values(data.dim, values, data.num_nodes)
+    seconds = time.perf_counter() - t0
+    return GraphResult(data.dim, data.node_ids.copy(), poses, built.loop_idx, inlier, inlier.astype(float), r2,
+                       initial_cost, final_cost, iters, seconds, init_seconds, params.solver.value,
+                       params.robust.value, method.value, 0, notes + [f"build {t0 - t_start:.3f} s"])

@@ -1,0 +1,125 @@
+"""Local pairwise consistency of loop closures: how many nearby loops agree with each loop.
+
+Two loops p (a_p -> b_p) and q (a_q -> b_q) are neighbours when both ends are within `window` nodes of each other
+(|a_p - a_q| <= W and |b_p - b_q| <= W). They agree when the cycle
+    a_q -> a_p (odometry) -> b_p (loop p) -> b_q (odometry) -> a_q (loop q, inverted)
+closes within the chi-square test of its stated covariance (both loops plus the odometry steps in the cycle).
+The odometry in the cycle is short (at most 2W steps), so accumulated drift - however large over the whole
+trajectory - does not enter the test: this is what makes it drift-proof, unlike a test of a loop against the
+drifted estimate at its arrival. A true loop closure event usually yields several consecutive loops (a revisited
+stretch) that support each other; a random false loop has no support. Groups of mutually consistent false loops
+(the same aliasing repeated along a stretch) do support each other: the global robust solve must settle those.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial.transform import Rotation
+
+from graph.model import PoseGraphData
+
+
+def _matrices(dim: int, rows: np.ndarray) -> np.ndarray:
+    """(N, 3|4, 3|4) homogeneous matrices from (x, y, theta) or (x, y, z, qx, qy, qz, qw) rows."""
+    rows = np.asarray(rows, float)
+    n = len(rows)
+    if dim == 2:
+        c, s = np.cos(rows[:, 2]), np.sin(rows[:, 2])
+        m = np.zeros((n, 3, 3))
+        m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1] = c, -s, s, c
+        m[:, :2, 2] = rows[:, :2]
+        m[:, 2, 2] = 1.0
+        return m
+    m = np.zeros((n, 4, 4))
+    m[:, :3, :3] = Rotation.from_quat(rows[:, 3:7]).as_matrix()
+    m[:, :3, 3] = rows[:, :3]
+    m[:, 3, 3] = 1.0
+    return m
+
+
+def _inverse(m: np.ndarray) -> np.ndarray:
+    d = m.shape[-1] - 1
+    out = np.zeros_like(m)
+    rt = np.swapaxes(m[:, :d, :d], 1, 2)
+    out[:, :d, :d] = rt
+    out[:, :d, d] = -np.einsum("nij,nj->ni", rt, m[:, :d, d])
+    out[:, d, d] = 1.0
+    return out
+
+
+def _tangent(dim: int, m: np.ndarray) -> np.ndarray:
+    """(translation, rotation) error vectors in the file's information order."""
+    if dim == 2:
+        return np.column_stack([m[:, 0, 2], m[:, 1, 2], np.arctan2(m[:, 1, 0], m[:, 0, 0])])
+    return np.column_stack([m[:, :3, 3], Rotation.from_matrix(m[:, :3, :3]).as_rotvec()])
+
+
+def chain_poses(data: PoseGraphData) -> np.ndarray:
+    """Dead-reckoning matrices: odometry composed along node order (position k -> k+1, either direction)."""
+    a, b = data.edge_index_pairs()
+    odo = np.flatnonzero(~data.is_loop & (np.abs(a - b) == 1))
+    z = _matrices(data.dim, data.measurements[odo])
+    step = np.repeat(np.eye(data.dim + 1)[None], max(data.num_nodes - 1, 0), axis=0)
+    fwd = a[odo] < b[odo]
+    lo = np.minimum(a[odo], b[odo])
+    step[lo[fwd]] = z[fwd]
+    step[lo[~fwd]] = _inverse(z[~fwd])
+    out = np.empty((data.num_nodes, data.dim + 1, data.dim + 1))
+    out[0] = np.eye(data.dim + 1)
+    for k in range(1, data.num_nodes):
+        out[k] = out[k - 1] @ step[k - 1]
+    return out
+
+
+def loop_support(data: PoseGraphData, window: int, threshold: float, odometry_cov: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Agreeing neighbour pairs (see the module doc): (P, Q, r2): loop indices (loop order), P before Q in time,
+    and the squared Mahalanobis error of their cycle on the stated covariances.
+
+    threshold: chi-square bound on the cycle's squared Mahalanobis error. odometry_cov: covariance of one
+    odometry step (default: the mean of the graph's odometry covariances), added once per step in the cycle.
+    """
+    L = data.num_loops
+    none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+    if L < 2 or window <= 0:
+        return none
+    a_all, b_all = data.edge_index_pairs()
+    li = data.loop_edges()
+    a, b = a_all[li], b_all[li]
+    z = _matrices(data.dim, data.measurements[li])
+    swap = a > b                      # orient every loop from the earlier node to the later one
+    z[swap] = _inverse(z[swap])
+    a, b = np.minimum(a, b), np.maximum(a, b)
+    cov = np.linalg.inv(data.information[li])
+    if odometry_cov is None:
+        odo_info = data.information[~data.is_loop]
+        odometry_cov = np.linalg.inv(odo_info).mean(axis=0) if len(odo_info) else np.zeros(cov.shape[1:])
+    x = chain_poses(data)
+    order = np.argsort(a, kind="stable")
+    a_s = a[order]
+    pairs_p, pairs_q = [], []
+    for rank, p in enumerate(order.tolist()):
+        hi = np.searchsorted(a_s, a[p] + window, side="right")
+        cand = order[rank + 1:hi]
+        cand = cand[np.abs(b[cand] - b[p]) <= window]
+        pairs_p.append(np.full(len(cand), p))
+        pairs_q.append(cand)
+    P, Q = np.concatenate(pairs_p), np.concatenate(pairs_q)
+    if len(P) == 0:
+        return none
+    xi = _inverse(x)
+    # cycle: inv(z_q) * inv(x_aq) x_ap * z_p * inv(x_bp) x_bq  (identity when both loops and the odometry agree)
+    m = _inverse(z[Q]) @ (xi[a[Q]] @ x[a[P]]) @ z[P] @ (xi[b[P]] @ x[b[Q]])
+    e = _tangent(data.dim, m)
+    steps = (np.abs(a[P] - a[Q]) + np.abs(b[P] - b[Q]))[:, None, None]
+    s = cov[P] + cov[Q] + steps * odometry_cov[None]
+    r2 = np.einsum("ni,ni->n", e, np.linalg.solve(s, e[..., None])[..., 0])
+    ok = r2 <= threshold
+    return P[ok], Q[ok], r2[ok]
+
+
+def clusters(num_loops: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Cluster label per loop: connected components of the agreeing pairs (a loop without support: its own)."""
+    adj = coo_matrix((np.ones(len(p)), (p, q)), shape=(num_loops, num_loops))
+    return connected_components(adj, directed=False)[1]
