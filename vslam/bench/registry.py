@@ -43,6 +43,8 @@ BENCHMARKS: dict[str, Benchmark] = {b.name: b for b in (
               "visual-memory localisation: paper tables on real sets, pydbow comparison, repeatability, query time"),
     Benchmark("odometry", "vslam.bench.odometry",
               "VO drift and frames/s on simulated floors vs wheel+gyro fusion and cv2.estimateAffinePartial2D"),
+    Benchmark("paper", "vslam.bench.paper",
+              "seed 001's experiment: 110 m of printed wood, 7154 frames, modes 1-6; Tables IV and V beside the paper"),
     Benchmark("pipeline", "vslam.bench.pipeline",
               "end-to-end SLAM frames/s, accuracy (ATE, start-to-end) and peak memory on simulated sequences"),
 )}
