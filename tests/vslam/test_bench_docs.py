@@ -97,7 +97,7 @@ def test_vslam_bench_writes_the_docs_with_its_command(fake, tmp_path, capsys):
 
 def test_every_registered_benchmark_loads_and_parses_its_help(capsys):
     assert sorted(BENCHMARKS) == ["batch", "descriptors", "fuzz", "graph", "horizon", "localize", "loops", "odometry",
-                                  "pipeline"]
+                                  "paper", "pipeline"]
     for name, bench in BENCHMARKS.items():
         mod = bench.load()
         assert callable(mod.add_arguments) and callable(mod.run)
