@@ -13,11 +13,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 from distributed import Client, as_completed
 
 from vslam.batch.errors import BatchError
 from vslam.batch.events import EngineEvents, lost_worker_outcome
 from vslam.batch.task import SequenceTask, attempts_started, process_sequence
+
+
+def process_on_one_core(task: SequenceTask) -> dict:
+    """`process_sequence` with OpenCV single-threaded: a worker process holds one core (start workers with
+    `--nthreads 1`, one per core), and OpenCV's own thread pool in each would oversubscribe the machine."""
+    cv2.setNumThreads(1)
+    return process_sequence(task)
 
 
 def connect(scheduler: str) -> Client:
@@ -46,7 +54,7 @@ class DaskCluster:
 
     def _submit(self, task: SequenceTask, n: int):
         # pure=False: the same sequence submitted again is new work, not a cached result
-        return self.client.submit(process_sequence, task, key=f"vslam-batch-{task.run_id}-{task.name}-{n}",
+        return self.client.submit(process_on_one_core, task, key=f"vslam-batch-{task.run_id}-{task.name}-{n}",
                                   pure=False, retries=0)
 
     def run(self, tasks: list[SequenceTask], events: EngineEvents) -> None:

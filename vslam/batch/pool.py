@@ -13,6 +13,8 @@ import time
 from collections import deque
 from multiprocessing.connection import Connection, wait
 
+import cv2
+
 from vslam.batch.events import EngineEvents, lost_worker_outcome
 from vslam.batch.task import SequenceTask, process_sequence
 
@@ -50,7 +52,9 @@ def start_server() -> float:
     return time.perf_counter() - t0
 
 
-def _child(task: SequenceTask, conn: Connection) -> None:
+def _child(task: SequenceTask, conn: Connection, threads: int) -> None:
+    # a pool of N processes on N cores: OpenCV's own thread pool in every child would oversubscribe the cores
+    cv2.setNumThreads(threads)
     last = [0.0]
 
     def progress(done: int, total: int) -> None:
@@ -80,7 +84,9 @@ class LocalPool:
             while pending and len(running) < self.workers:
                 task = pending.popleft()
                 recv, send = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_child, args=(task, send), name=f"vslam-batch-{task.name}", daemon=True)
+                threads = 1 if self.workers > 1 else -1   # -1: OpenCV's default
+                proc = ctx.Process(target=_child, args=(task, send, threads), name=f"vslam-batch-{task.name}",
+                                   daemon=True)
                 proc.start()
                 send.close()   # the child holds the only writing end: EOF when it dies
                 starts[task.name] = starts.get(task.name, 0) + 1
