@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from vslam.cli.cmd_run import build_config
+from vslam.cli.cmd_run import add_pipeline_options, build_config
 from vslam.cli.progress import Progress
 
 NAME = "batch"
@@ -27,18 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                             "workers must reach the sequences and OUT by the same paths)")
     p.add_argument("--retry-failed", action="store_true",
                    help="run again the sequences that failed in an earlier batch into OUT (changed ones always run)")
-    run = p.add_argument_group("options of `vslam run`, applied to every sequence")
-    run.add_argument("--mode", type=int, choices=range(1, 7), metavar="1..6",
-                     help="descriptor size mode (512 B .. 16 kB per keyframe; default 4)")
-    run.add_argument("--loop-model", help="P(loop|score) model from `vslam train-loops` (default: the shipped model)")
-    run.add_argument("--incremental", action="store_true", help="iSAM2 as keyframes arrive instead of batch LM")
-    run.add_argument("--config", help="YAML or TOML file with pipeline settings (see --print-config)")
-    run.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                     help="override one setting by its dotted key (repeatable; a manifest row's overrides go on top)")
-    run.add_argument("--no-loops", action="store_true", help="visual odometry only")
-    run.add_argument("--no-recording", action="store_true", help="do not write recording.rrd")
-    run.add_argument("--camera", help="camera.yaml for image folders and videos")
-    run.add_argument("--max-frames", type=int, help="process only the first N frames of each sequence")
+    run = p.add_argument_group("options of `vslam run`, applied to every sequence (a manifest row's overrides go "
+                              "on top of --set)")
+    add_pipeline_options(run)
     run.add_argument("--print-config", action="store_true", help="print the effective configuration as YAML and exit")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary table")
 

@@ -13,9 +13,9 @@ HELP = "run SLAM (VO + compact-descriptor loops + robust pose graph) on a sequen
        "graph, metrics, plots and a Rerun recording"
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("sequence", help="sequence directory (or TUM RGB-D / KITTI folder, image folder, video)")
-    p.add_argument("--out", required=True, help="output directory")
+def add_pipeline_options(p) -> None:
+    """The options that build the pipeline config (`build_config`); `vslam batch` applies the same ones to every
+    sequence. `p` is a parser or an argument group."""
     p.add_argument("--mode", type=int, choices=range(1, 7), metavar="1..6",
                    help="descriptor size mode (512 B .. 16 kB per keyframe; default 4)")
     p.add_argument("--loop-model", help="P(loop|score) model from `vslam train-loops` (default: the shipped model)")
@@ -28,6 +28,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-recording", action="store_true", help="do not write recording.rrd")
     p.add_argument("--camera", help="camera.yaml for image folders and videos")
     p.add_argument("--max-frames", type=int, help="process only the first N frames")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("sequence", help="sequence directory (or TUM RGB-D / KITTI folder, image folder, video)")
+    p.add_argument("--out", required=True, help="output directory")
+    add_pipeline_options(p)
     p.add_argument("--print-config", action="store_true", help="print the effective configuration as YAML and exit")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.add_argument("--json", action="store_true",
