@@ -14,15 +14,15 @@ def csail(shared_data):
 
 
 def test_csail_least_squares_and_isam2(csail):
-    # edges-only file (1045 poses, 1172 edges): odometry guess, then LM; its near-singular information stops
-    # iSAM2's Cholesky, which must fall back to QR and reach the same optimum
+    # edges-only file (1045 poses, 1172 edges): odometry guess, then LM; iSAM2 must reach the same optimum. Its
+    # near-singular information stops iSAM2's Cholesky on some machines (then it falls back to QR): whether that
+    # happens depends on the BLAS build, so only the outcome is asserted
     lm = optimize(csail, GraphParams.preset("least_squares"), init="odometry")
     lago = optimize(csail, GraphParams.preset("least_squares"), init="lago")
     inc = optimize(csail, GraphParams.preset("least_squares"), solver="isam2")
     assert lm.final_cost == pytest.approx(20.2754, rel=1e-4)
     assert lago.final_cost == pytest.approx(lm.final_cost, rel=1e-6)
     assert inc.final_cost == pytest.approx(lm.final_cost, rel=1e-2)
-    assert any("rebuilt with qr" in n for n in inc.notes)
 
 
 def test_csail_half_false_loops(csail):

@@ -2,7 +2,8 @@
 import numpy as np
 
 from odometry.shared.poses import compose, integrate
-from vslam.bench.odometry_regimes import naive_orb_chain, planar_ate, subsample
+from vslam.bench.baseline_orb_chain import naive_orb_chain, planar_ate
+from vslam.bench.odometry_regimes import subsample
 from vslam.io import open_sequence
 from vslam.sim import Effects, SimConfig, simulate
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vslam.bench.baseline_orb_chain import orb_affine_chain
+from vslam.bench.baseline_orb_chain import naive_orb_chain
 from vslam.bench.paper_tables import PAPER_TABLE_IV, table_iv, table_v
 from vslam.io import open_sequence
 from vslam.sim import SimConfig, simulate
@@ -12,7 +12,7 @@ from vslam.sim import SimConfig, simulate
 def test_orb_chain_follows_a_simulated_floor(tmp_path):
     simulate(SimConfig(floor="carpet", length=1.5, max_frames=60, width=320, height=240, focal=250.0), tmp_path / "s")
     seq = open_sequence(tmp_path / "s")
-    est = orb_affine_chain(seq)
+    est, _, _ = naive_orb_chain(seq, seq.require_camera())
     gt = seq.groundtruth_planar()[: len(est)]
     assert est.shape == (len(seq), 3) and np.isfinite(est).all()
     true_len = np.sum(np.hypot(*np.diff(gt[:, :2], axis=0).T))

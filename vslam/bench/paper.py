@@ -26,7 +26,7 @@ import numpy as np
 
 from loops.cdvs import MODES, CdvsParams, LoopDatabase, decode, encode, match
 from odometry.shared.poses import between, compose
-from vslam.bench.baseline_orb_chain import orb_affine_chain
+from vslam.bench.baseline_orb_chain import naive_orb_chain, planar_ate
 from vslam.bench.paper_tables import PAPER_TABLE_IV, PAPER_TABLE_V, table_iv, table_v
 from vslam.bench.results import BenchResult, write_json
 from vslam.bench.timing import median
@@ -129,20 +129,10 @@ def _run_mode(seq, mode: int, out: Path) -> ModeRun:
 
 def _baseline_chain(seq) -> dict:
     gt = seq.groundtruth_planar()
-    poses = orb_affine_chain(seq)
-    s2e = start_to_end_error(poses, gt[: len(poses)])
-    ate = _ate_se2(poses, gt[: len(poses)])
-    return {"start_to_end": s2e, "ate_m": ate, "poses": poses}
-
-
-def _ate_se2(est: np.ndarray, gt: np.ndarray) -> float:
-    """RMSE of positions after the best planar rotation + translation (Umeyama without scale)."""
-    ok = ~np.isnan(gt[:, 0]) & ~np.isnan(est[:, 0])
-    a, b = est[ok, :2], gt[ok, :2]
-    ma, mb = a.mean(0), b.mean(0)
-    u, _, vt = np.linalg.svd((b - mb).T @ (a - ma))
-    r = u @ np.diag([1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
-    return float(np.sqrt(np.mean(np.sum(((a - ma) @ r.T + mb - b) ** 2, axis=1))))
+    poses, _, _ = naive_orb_chain(seq, seq.require_camera())
+    gt = gt[: len(poses)]
+    ok = ~np.isnan(gt[:, 0])
+    return {"start_to_end": start_to_end_error(poses, gt), "ate_m": planar_ate(poses[ok], gt[ok]), "poses": poses}
 
 
 # ---------------------------------------------------------------------------------------------------- table V
