@@ -62,17 +62,17 @@ def gnc_tls(base: list, loops: list, values: gtsam.Values, c2: np.ndarray, label
     if np.any(r2_cl > c2_cl):
         pos = excess > 0
         mu = max(float(np.min(c2_cl[pos] / excess[pos])), 1e-6)
-        for outer in range(1, params.gnc_max_iterations + 1):
+        for outer in range(1, params.robust.gnc_max_iterations + 1):
             new_w = tls_weights(r2_cl, c2_cl, mu)
-            values, it = _lm(_weighted(base, loops, new_w[label]), values, params, params.gnc_inner_iterations)
+            values, it = _lm(_weighted(base, loops, new_w[label]), values, params, params.robust.gnc_inner_iterations)
             iters += it
             r2_cl = np.bincount(label, weights=squared_residuals(loops, values), minlength=n_cl)
             change = float(np.max(np.abs(new_w - weights)))
             weights = new_w
-            tol = params.gnc_weights_tol
+            tol = params.robust.gnc_weights_tol
             if bool(np.all((weights < tol) | (weights > 1 - tol))) and change < tol:
                 break
-            mu *= params.gnc_mu_step
+            mu *= params.robust.gnc_mu_step
     return values, (weights > 0.5)[label], outer, iters
 
 
@@ -93,28 +93,29 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     base_graph = graph_of(base)
     t0 = time.perf_counter()
     # 1. local consistency
-    pairs = loop_support(data, params.support_window, float(chi2.ppf(params.support_probability, dof)))
-    label = clusters(L, pairs[0], pairs[1]) if (L and params.cluster_weights) else np.arange(L)
+    pairs = loop_support(data, params.robust.support_window, float(chi2.ppf(params.robust.support_probability, dof)))
+    label = clusters(L, pairs[0], pairs[1]) if (L and params.robust.cluster_weights) else np.arange(L)
     supported = np.zeros(L, bool)
     supported[pairs[0]] = True
     supported[pairs[1]] = True
     # 2. starts: the odometry chain; least squares on the supported loops from LAGO / chordal
     starts = [("odometry", values_from_array(data.dim, initial_guess(data, built, InitMethod.ODOMETRY)))]
-    if not params.odometry_start:
+    if not params.robust.odometry_start:
         starts = []
     method = resolve_init(data, params.replace(robust="none"))     # AUTO: LAGO (2D) / chordal (3D)
     if supported.any() or method == InitMethod.GIVEN:
         try:
             guess = initial_guess(data, built.subset(supported), method)
-            v, _ = _lm(built.graph(supported), values_from_array(data.dim, guess), params, params.lm_max_iterations)
+            v, _ = _lm(built.graph(supported), values_from_array(data.dim, guess), params,
+                       params.solver.lm_max_iterations)
             starts.append(("supported loops", v))
         except RuntimeError:
             notes.append("LAGO / chordal start on the supported loops failed")
-    if params.calibrate_noise and len(pairs[2]) >= params.calibration_min_loops:
+    if params.robust.calibrate_noise and len(pairs[2]) >= params.robust.calibration_min_loops:
         # variance factor from the agreeing cycles: their median error over the chi-square median. Local, so
         # neither drift nor a false loop bending the map (both inflate a global a-posteriori estimate) enter it
         sigma0 = float(np.median(pairs[2])) / float(chi2.ppf(0.5, dof))
-        scale = params.calibration_margin * sigma0
+        scale = params.robust.calibration_margin * sigma0
         c2 = c2 * scale
         notes.append(f"variance factor {sigma0:.3g}: thresholds x {scale:.3g}")
     init_seconds = time.perf_counter() - t0
@@ -125,7 +126,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     iters = 0
     # GNC over the supported loops only: an unsupported loop is tested once the map is solved (step 4). This keeps
     # random long-range loops out of every inner solve (their fill-in is what makes a joint solve slow)
-    cand = supported if params.support_window > 0 else np.ones(L, bool)
+    cand = supported if params.robust.support_window > 0 else np.ones(L, bool)
     sub = built.subset(cand)
     _, sub_label = np.unique(label[cand], return_inverse=True)
     for name, v0 in starts:
@@ -139,10 +140,10 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             best = (f, values, inlier)
     _, values, inlier = best
     # 4. polish; then admit every loop that fits its threshold at the solution, re-solve, until none is added
-    values, it = _lm(built.graph(inlier), values, params, params.lm_max_iterations)
+    values, it = _lm(built.graph(inlier), values, params, params.solver.lm_max_iterations)
     iters += it
     trial = ~cand
-    if 0 < trial.sum() <= params.trial_max_loops:
+    if 0 < trial.sum() <= params.robust.trial_max_loops:
         # few unsupported loops (a lone loop closing a long drift): judge them by a GNC that includes them, so
         # the map can move to them; a test at a solution without them would see the drift as their residual
         pool = inlier | trial
@@ -154,13 +155,13 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         if tls_objective(base_graph, built.loops, v, c2) <= tls_objective(base_graph, built.loops, values, c2):
             values, inlier = v, new_inlier
             notes.append(f"{int(trial.sum())} unsupported loops tried jointly: {int((kept & trial[pool]).sum())} kept")
-    for _ in range(params.readmit_rounds):
+    for _ in range(params.robust.readmit_rounds):
         r2 = squared_residuals(built.loops, values)
         readmit = ~inlier & (r2 <= c2)
         if not readmit.any():
             break
         inlier = inlier | readmit
-        values, it = _lm(built.graph(inlier), values, params, params.lm_max_iterations)
+        values, it = _lm(built.graph(inlier), values, params, params.solver.lm_max_iterations)
         iters += it
         notes.append(f"admitted {int(readmit.sum())} loops that fit at the solution")
     r2 = squared_residuals(built.loops, values)
@@ -169,5 +170,5 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     poses = array_from_values(data.dim, values, data.num_nodes)
     seconds = time.perf_counter() - t0
     return GraphResult(data.dim, data.node_ids.copy(), poses, built.loop_idx, inlier, inlier.astype(float), r2,
-                       initial_cost, final_cost, iters, seconds, init_seconds, params.solver.value,
-                       params.robust.value, method.value, 0, notes + [f"build {t0 - t_start:.3f} s"])
+                       initial_cost, final_cost, iters, seconds, init_seconds, params.solver.method.value,
+                       params.robust.method.value, method.value, 0, notes + [f"build {t0 - t_start:.3f} s"])
