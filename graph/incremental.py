@@ -253,12 +253,13 @@ class IncrementalPoseGraph:
             return None
         if n < 3:
             return float("inf")
-        q = float(np.quantile(np.fromiter(self._arrival_r2, float), self.params.robust.gate_quantile))
-        if self.params.robust.gate_admitted_cap and len(self._admitted_r2) >= self.params.robust.gate_window // 2:
+        rp = self.params.robust
+        q = float(np.quantile(np.fromiter(self._arrival_r2, float), rp.gate_quantile))
+        if rp.gate_admitted_cap and len(self._admitted_r2) >= rp.gate_window // 2:
             # only with a long admitted history: on a few dozen loops it ratchets the gate tight (CSAIL)
-            q = min(q, self.params.robust.gate_admitted_cap * float(np.quantile(np.fromiter(self._admitted_r2, float),
-                                                                         self.params.robust.gate_quantile)))
-        return self.params.robust.gate_factor * q
+            q = min(q, rp.gate_admitted_cap * float(np.quantile(np.fromiter(self._admitted_r2, float),
+                                                                rp.gate_quantile)))
+        return rp.gate_factor * q
 
     def _uncertainty(self, k: int) -> np.ndarray:
         """Odometry drift of node k since the robot last closed a loop (gtsam tangent order): the covariance of

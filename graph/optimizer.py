@@ -28,7 +28,7 @@ def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: 
     odometry tree with batch LM and no gate; a second failure is a GraphError naming the cause, never gtsam's.
     """
     solver_over = {k: v for k, v in (("method", solver), ("init", init)) if v is not None}
-    over = {k: v for k, v in (("solver", solver_over), ("robust", robust)) if v}
+    over = {k: v for k, v in (("solver", solver_over or None), ("robust", robust)) if v is not None}
     params = (params or GraphParams()).replace(**over)
     if data.num_nodes == 0:
         raise GraphError("the pose graph has no nodes")
