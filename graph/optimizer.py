@@ -144,41 +144,43 @@ class BatchStrategy(GraphStrategy):
     def solve(cls, data: PoseGraphData, params: GraphParams) -> GraphResult:
         return loop_rejector(data, params).solve(data, params)
 
-    def add_node(self, node_id, guess):
+    def add_node(self, node_id: int, guess: np.ndarray | None) -> None:
         self._graph.add_node(node_id, guess)
 
-    def add_odometry(self, i, j, delta, cov, information):
+    def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None,
+                     information: np.ndarray | None) -> None:
         self._graph.add_odometry(i, j, delta, cov, information)
 
-    def add_loop(self, i, j, delta, cov, probability, information):
+    def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None, probability: float | None,
+                 information: np.ndarray | None) -> int:
         return self._graph.add_loop(i, j, delta, cov, probability=probability, information=information)
 
-    def set_guesses(self, poses):
+    def set_guesses(self, poses: np.ndarray) -> None:
         self._graph.set_guesses(poses)
 
-    def update(self):
+    def update(self) -> tuple[np.ndarray, np.ndarray]:
         res = self.result()
         return res.node_ids, res.poses
 
-    def final(self, warm_start):
+    def final(self, warm_start: bool) -> GraphResult:
         params = self.params.replace(solver={"init": InitMethod.GIVEN}) if warm_start else self.params
         return optimize(self._graph.to_data(), params)
 
-    def to_data(self):
+    def to_data(self) -> PoseGraphData:
         return self._graph.to_data()
 
-    def online_inliers(self):
+    def online_inliers(self) -> np.ndarray:
         # before the first solve every loop counts; after it, the last labels (loops added since are not solved)
         if self._result is None:
             return np.ones(self.num_loops, bool)
         return np.asarray(self._result.loop_inlier, bool)
 
     @property
-    def num_nodes(self):
+    def num_nodes(self) -> int:
         return self._graph.num_nodes
 
     @property
-    def num_loops(self):
+    def num_loops(self) -> int:
         return self._graph.num_loops
 
 
@@ -203,24 +205,26 @@ class IncrementalStrategy(GraphStrategy):
         """The whole graph replayed through iSAM2 as an online system would see it; loops classified at the end."""
         return full_pass(data, cls.online_params(params))
 
-    def add_node(self, node_id, guess):
+    def add_node(self, node_id: int, guess: np.ndarray | None) -> None:
         self._inc.add_node(node_id, guess)
 
-    def add_odometry(self, i, j, delta, cov, information):
+    def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None,
+                     information: np.ndarray | None) -> None:
         self._inc.add_odometry(i, j, delta, cov, information)
 
-    def add_loop(self, i, j, delta, cov, probability, information):
+    def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None, probability: float | None,
+                 information: np.ndarray | None) -> int:
         return self._inc.add_loop(i, j, delta, cov, probability=probability, information=information)
 
-    def set_guesses(self, poses):
+    def set_guesses(self, poses: np.ndarray) -> None:
         """No-op: iSAM2 keeps its own estimate (a guess only places a node when it is added)."""
 
-    def update(self):
+    def update(self) -> tuple[np.ndarray, np.ndarray]:
         self._inc.update()
         self._estimate = self._inc.estimate()
         return self._estimate
 
-    def final(self, warm_start):
+    def final(self, warm_start: bool) -> GraphResult:
         if self.params.robust.method != RobustMode.CONSENSUS:
             return self._inc.result(classify=True)
         # the final labels come from the batch consensus solve started at the iSAM2 estimate: the online gate
@@ -234,18 +238,18 @@ class IncrementalStrategy(GraphStrategy):
         res.notes.insert(0, f"iSAM2 pass {online.seconds:.3f} s, then the batch consensus solve from it")
         return res
 
-    def to_data(self):
+    def to_data(self) -> PoseGraphData:
         return self._inc.to_data()
 
-    def online_inliers(self):
+    def online_inliers(self) -> np.ndarray:
         return self._inc.loop_inliers()
 
     @property
-    def num_nodes(self):
+    def num_nodes(self) -> int:
         return self._inc.num_nodes
 
     @property
-    def num_loops(self):
+    def num_loops(self) -> int:
         return self._inc.num_loops
 
 
