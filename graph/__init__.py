@@ -8,8 +8,11 @@
     ids, poses = g.update()                           # current estimate (batch: robust solve; iSAM2: insert)
     res = g.result()                                  # res.poses (N, 3), res.loop_inlier[k], res.summary()
 
-`RobustPoseGraph` is the front door; `PoseGraph` (batch) and `IncrementalPoseGraph` (iSAM2) are its strategies. `read_graph` / `write_graph` read and write g2o and TORO files; `optimize(data, params)`
-solves a `PoseGraphData`. See docs/graph.md for the design and the measurements behind the defaults.
+`RobustPoseGraph` is the front door: its solver is a strategy (`BatchStrategy`: LM; `IncrementalStrategy`: iSAM2,
+graph.optimizer), its robust method a `LoopRejector` (graph.rejection). `optimize(data, params)` (=
+`RobustPoseGraph.solve`) solves a whole `PoseGraphData`; `read_graph` / `write_graph` read and write g2o and TORO
+files; `PoseGraph` builds a `PoseGraphData` node by node. See docs/graph.md for the design and the measurements
+behind the defaults.
 """
 from graph.formats import (
                            GraphFormatError,
@@ -23,7 +26,7 @@ from graph.formats import (
 )
 from graph.incremental import IncrementalPoseGraph
 from graph.model import PoseGraphData, classify_edges
-from graph.optimizer import optimize
+from graph.optimizer import BatchStrategy, GraphStrategy, IncrementalStrategy, optimize
 from graph.outliers import LoopScores, inject_false_loops, loop_scores
 from graph.params import (
                            GncImpl,
@@ -38,11 +41,12 @@ from graph.params import (
                            SolverParams,
 )
 from graph.pose_graph import PoseGraph
+from graph.rejection import LoopRejector, loop_rejector
 from graph.result import GraphResult, write_g2o, write_tum
 from graph.robust_graph import RobustPoseGraph
 
-__all__ = ["GncImpl", "GncLoss", "GraphFormatError", "GraphParams", "GraphResult", "IncrementalParams",
-           "IncrementalPoseGraph", "InitMethod", "LoopScores", "LoopWeighting", "PoseGraph", "PoseGraphData",
+__all__ = ["BatchStrategy", "GncImpl", "GncLoss", "GraphFormatError", "GraphParams", "GraphResult", "GraphStrategy", "IncrementalParams",
+           "IncrementalPoseGraph", "IncrementalStrategy", "InitMethod", "LoopRejector", "LoopScores", "LoopWeighting", "PoseGraph", "PoseGraphData",
            "RobustMode", "RobustParams", "RobustPoseGraph", "Solver", "SolverParams",
-           "classify_edges", "format_g2o", "format_toro", "inject_false_loops", "loop_scores", "optimize",
+           "classify_edges", "format_g2o", "format_toro", "inject_false_loops", "loop_rejector", "loop_scores", "optimize",
            "read_g2o", "read_graph", "read_toro", "write_g2o", "write_graph", "write_toro", "write_tum"]

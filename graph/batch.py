@@ -1,11 +1,9 @@
 """Batch optimisation of a `PoseGraphData`: initial guess, robust loop handling, Levenberg-Marquardt.
 
-Robust modes run in three stages (docs/graph.md has the measurements behind each):
-1. gate (`gate_loops`): the graph is replayed in time order through iSAM2 and each loop is tested against the
-   estimate at its arrival; grossly inconsistent loops are deferred. Random false loops link distant places, and
-   one joint solve containing thousands of them costs minutes on a 10^4-node graph (Cholesky fill-in);
-2. robust solve of odometry + admitted loops: GNC (default), Huber or Cauchy;
-3. re-initialise from odometry + kept loops (LAGO / chordal), re-solve, and re-test every loop, deferred ones
+`solve` is the LM solve behind the `Direct`, `ArrivalGate` and `SplitChain` robust methods (graph.rejection); the
+consensus method (graph.robust) uses its building blocks. docs/graph.md has the measurements behind each step:
+1. robust solve of odometry + the candidate loops (all, or those the arrival gate admitted): GNC, Huber or Cauchy;
+2. re-initialise from odometry + kept loops (LAGO / chordal), re-solve, and re-test every loop, deferred ones
    included, against thresholds scaled to the residual level of the kept loops; repeat until labels settle.
 Factor layout handed to gtsam: anchor priors, odometry edges, loop edges (each in data order), so the known
 inliers of GNC are the leading factor indices.

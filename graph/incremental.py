@@ -129,6 +129,20 @@ class IncrementalPoseGraph:
         self._parent.append(k)
         self._drift.append(None)
 
+    def placed(self, node_id: int) -> bool:
+        """Whether the node has a pose to start from (its guess, or one composed from odometry)."""
+        return self._guess[self._key[int(node_id)]] is not None
+
+    def place(self, node_id: int, guess: np.ndarray) -> None:
+        """Give a node that odometry has not placed (e.g. a file vertex linked only to later nodes) its guess."""
+        k = self._key[int(node_id)]
+        if self._guess[k] is not None:
+            raise ValueError(f"node {int(node_id)} is already placed")
+        g = np.asarray(guess, float).reshape(POSE_WIDTH[self.dim])
+        if not np.all(np.isfinite(g)):
+            raise ValueError(f"node {int(node_id)}: guess must be finite")
+        self._guess[k] = g.copy()
+
     def _find(self, k: int) -> int:
         root = k
         while self._parent[root] != root:
@@ -573,10 +587,10 @@ def _replay(data: PoseGraphData, params: GraphParams) -> tuple[IncrementalPoseGr
                              probability=None if np.isnan(prob[e]) else prob[e])
             else:
                 inc.add_odometry(i, j, data.measurements[e], information=data.information[e])
-        if inc._guess[k] is None:
+        if not inc.placed(ids[k]):
             if not np.isfinite(guesses[k]).all():
                 raise ValueError(f"node {ids[k]} is not linked to earlier nodes by odometry and has no guess")
-            inc._guess[k] = guesses[k].copy()
+            inc.place(ids[k], guesses[k])
     inc.update(final=True)
     return inc, order
 

@@ -1,22 +1,26 @@
-"""The batch front door: `optimize(data, params)` picks the solver (batch LM, or a full iSAM2 pass) and, for robust
-modes, runs the gated incremental pass before the batch robust solve (see `graph.batch` and `graph.incremental`).
+"""The solver strategies of `RobustPoseGraph` (batch Levenberg-Marquardt, iSAM2) and `optimize(data, params)`, the
+whole-graph solve behind `RobustPoseGraph.solve` and `vslam graph optimize`.
+
+A strategy holds the graph while it is built (`add_node`, `add_odometry`, `add_loop`), brings the estimate up to
+date (`update`), and makes the final solve (`result`); its class method `solve(data, params)` does the same for a
+whole `PoseGraphData` (a file). Robust handling of loops is not the strategy's business: batch solves ask
+`graph.rejection.loop_rejector` for the robust method; iSAM2 protects loops online (gate and kernel,
+graph.incremental) and classifies them at the end.
 """
 from __future__ import annotations
 
-import time
+from abc import ABC, abstractmethod
 
 import numpy as np
 
-from graph import incremental
-from graph.batch import solve
-from graph.components import anchor_components, loops_join_odometry_parts
+from graph.components import anchor_components
 from graph.errors import GraphError
-from graph.factors import anchor_nodes
-from graph.model import TANGENT_DIM, PoseGraphData
+from graph.incremental import IncrementalPoseGraph, full_pass
+from graph.model import PoseGraphData
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
+from graph.pose_graph import PoseGraph
+from graph.rejection import loop_rejector
 from graph.result import GraphResult
-from graph.robust import robust_solve
-from graph.thresholds import loop_thresholds
 
 
 def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: Solver | str | None = None,
@@ -34,14 +38,14 @@ def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: 
         raise GraphError("the pose graph has no nodes")
     data, notes = anchor_components(data)
     try:
-        res = _optimize(data, params)
+        res = strategy_class(params).solve(data, params)
     except GraphError:
         raise
     except (RuntimeError, IndexError, ValueError) as exc:
         plain = params.replace(solver={"method": Solver.LM, "init": InitMethod.ODOMETRY},
                                robust={"gate_loops": False})
         try:
-            res = _optimize(data, plain)
+            res = BatchStrategy.solve(data, plain)
         except GraphError:
             raise
         except (RuntimeError, IndexError, ValueError) as exc2:
@@ -57,59 +61,201 @@ def _first_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {' '.join(lines[:2])}" if lines else type(exc).__name__
 
 
-def _optimize(data: PoseGraphData, params: GraphParams) -> GraphResult:
-    if params.solver.method == Solver.ISAM2:
-        # the incremental pass gates loops on arrival and classifies them with its own GNC
-        inc = params.replace(robust=RobustMode.GNC) if params.robust.method == RobustMode.CONSENSUS else params
-        return incremental.full_pass(data, inc)
-    if params.robust.method != RobustMode.NONE and data.num_loops and loops_join_odometry_parts(data):
-        # the gate and the consensus' odometry-chain start both test loops against odometry, which does not reach
-        # across the gap (ETHCampus: the far part ends metres off); the ungated GNC solve keeps those loops
-        gnc = params.replace(robust=RobustMode.GNC) if params.robust.method == RobustMode.CONSENSUS else params
-        res = solve(data, gnc)
-        res.notes.insert(0, "loops are the only link between parts of the odometry chain: solved without the gate")
+class GraphStrategy(ABC):
+    """How a `RobustPoseGraph` solves: one graph store, one update rule, one final solve."""
+
+    online = False                  # True: update() is cheap and meant to be called as data arrives
+
+    def __init__(self, dim: int, params: GraphParams):
+        self.dim = dim
+        self.params = params
+        self._result: GraphResult | None = None
+        self._estimate: tuple[np.ndarray, np.ndarray] | None = None
+
+    @classmethod
+    @abstractmethod
+    def solve(cls, data: PoseGraphData, params: GraphParams) -> GraphResult:
+        """A whole graph in one call (no anchoring of components nor failure fallback: see `optimize`)."""
+
+    @abstractmethod
+    def add_node(self, node_id: int, guess: np.ndarray | None) -> None: ...
+
+    @abstractmethod
+    def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None,
+                     information: np.ndarray | None) -> None: ...
+
+    @abstractmethod
+    def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None, probability: float | None,
+                 information: np.ndarray | None) -> int: ...
+
+    @abstractmethod
+    def set_guesses(self, poses: np.ndarray) -> None: ...
+
+    @abstractmethod
+    def update(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    @abstractmethod
+    def final(self, warm_start: bool) -> GraphResult: ...
+
+    @abstractmethod
+    def to_data(self) -> PoseGraphData: ...
+
+    @abstractmethod
+    def online_inliers(self) -> np.ndarray:
+        """Inlier flag of each loop when no final result covers them all."""
+
+    @property
+    @abstractmethod
+    def num_nodes(self) -> int: ...
+
+    @property
+    @abstractmethod
+    def num_loops(self) -> int: ...
+
+    def result(self, warm_start: bool = False) -> GraphResult:
+        """The final solve (every loop classified); kept as the latest estimate and labels."""
+        res = self.final(warm_start)
+        self._result = res
+        self._estimate = (res.node_ids, res.poses)
         return res
-    if params.robust.method == RobustMode.CONSENSUS:
-        return robust_solve(data, params)
-    if params.robust.method != RobustMode.NONE and params.robust.gate_loops and data.num_loops:
-        t0 = time.perf_counter()
-        try:
-            estimate, admitted = incremental.gate_pass(data, params)
-        except (ValueError, RuntimeError) as exc:
-            # a node order the replay cannot follow (a node linked only to later nodes): solve ungated
-            res = solve(data, params)
-            res.notes.insert(0, f"gate pass impossible, solved without it: {exc}".splitlines()[0])
-            return res
-        gate_seconds = time.perf_counter() - t0
-        seeded = data.copy()
-        seeded.poses = estimate
-        # the gate pass anchors node 0 only: other anchors (FIX, one per component) keep their given poses
-        anc = anchor_nodes(data)
-        given = anc[data.has_pose[anc]]
-        seeded.poses[given] = data.poses[given]
-        res = solve(seeded, params.replace(solver={"init": InitMethod.GIVEN}), candidates=admitted)
-        res.seconds += gate_seconds
-        res.init_seconds += gate_seconds
-        res.init = f"gated iSAM2 pass ({int(admitted.sum())} of {len(admitted)} loops admitted)"
-        res.notes.insert(0, f"gate pass {gate_seconds:.3f} s: {int((~admitted).sum())} loops deferred")
-        if res.loop_inlier.sum() < params.robust.gate_fallback_share * admitted.sum():
-            # the robust solve threw out most of what the gate admitted: the gate's estimate was a bad start
-            # (sphere2500 at 10 %: every loop rejected). Solve without the gate; keep the lower TLS objective.
-            alt = solve(data, params)
-            alt.seconds += res.seconds
-            if _tls_objective(data, alt, params) < _tls_objective(data, res, params):
-                alt.notes.insert(0, f"gated solve kept {int(res.loop_inlier.sum())} of {int(admitted.sum())} "
-                                    "admitted loops: solved without the gate")
-                return alt
+
+    def estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """(node ids, poses) of the latest estimate; before any solve, the nodes' guesses."""
+        if self._estimate is None:
+            data = self.to_data()
+            return data.node_ids, data.poses
+        return self._estimate
+
+    def loop_inliers(self) -> np.ndarray:
+        """The last result's labels while no loop was added since; else the strategy's online labels."""
+        if self._result is not None and len(self._result.loop_inlier) == self.num_loops:
+            return np.asarray(self._result.loop_inlier, bool)
+        return self.online_inliers()
+
+
+class BatchStrategy(GraphStrategy):
+    """Batch Levenberg-Marquardt: the graph is stored as added; every update is a robust solve of all of it."""
+
+    def __init__(self, dim: int, params: GraphParams):
+        super().__init__(dim, params)
+        self._graph = PoseGraph(dim)
+
+    @classmethod
+    def solve(cls, data: PoseGraphData, params: GraphParams) -> GraphResult:
+        return loop_rejector(data, params).solve(data, params)
+
+    def add_node(self, node_id: int, guess: np.ndarray | None) -> None:
+        self._graph.add_node(node_id, guess)
+
+    def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None,
+                     information: np.ndarray | None) -> None:
+        self._graph.add_odometry(i, j, delta, cov, information)
+
+    def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None, probability: float | None,
+                 information: np.ndarray | None) -> int:
+        return self._graph.add_loop(i, j, delta, cov, probability=probability, information=information)
+
+    def set_guesses(self, poses: np.ndarray) -> None:
+        self._graph.set_guesses(poses)
+
+    def update(self) -> tuple[np.ndarray, np.ndarray]:
+        res = self.result()
+        return res.node_ids, res.poses
+
+    def final(self, warm_start: bool) -> GraphResult:
+        params = self.params.replace(solver={"init": InitMethod.GIVEN}) if warm_start else self.params
+        return optimize(self._graph.to_data(), params)
+
+    def to_data(self) -> PoseGraphData:
+        return self._graph.to_data()
+
+    def online_inliers(self) -> np.ndarray:
+        # before the first solve every loop counts; after it, the last labels (loops added since are not solved)
+        if self._result is None:
+            return np.ones(self.num_loops, bool)
+        return np.asarray(self._result.loop_inlier, bool)
+
+    @property
+    def num_nodes(self) -> int:
+        return self._graph.num_nodes
+
+    @property
+    def num_loops(self) -> int:
+        return self._graph.num_loops
+
+
+class IncrementalStrategy(GraphStrategy):
+    """iSAM2: nodes and factors are inserted as they arrive (loops gated on arrival and behind a kernel); the final
+    solve classifies every loop. With robust mode `consensus` the online pass uses GNC to classify, and the final
+    labels come from the batch consensus solve started at the iSAM2 estimate."""
+
+    online = True
+
+    def __init__(self, dim: int, params: GraphParams):
+        super().__init__(dim, params)
+        self._inc = IncrementalPoseGraph(dim, self.online_params(params))
+
+    @staticmethod
+    def online_params(params: GraphParams) -> GraphParams:
+        """The iSAM2 pass classifies with its own GNC where the batch method is consensus."""
+        return params.replace(robust=RobustMode.GNC) if params.robust.method == RobustMode.CONSENSUS else params
+
+    @classmethod
+    def solve(cls, data: PoseGraphData, params: GraphParams) -> GraphResult:
+        """The whole graph replayed through iSAM2 as an online system would see it; loops classified at the end."""
+        return full_pass(data, cls.online_params(params))
+
+    def add_node(self, node_id: int, guess: np.ndarray | None) -> None:
+        self._inc.add_node(node_id, guess)
+
+    def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None,
+                     information: np.ndarray | None) -> None:
+        self._inc.add_odometry(i, j, delta, cov, information)
+
+    def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None, probability: float | None,
+                 information: np.ndarray | None) -> int:
+        return self._inc.add_loop(i, j, delta, cov, probability=probability, information=information)
+
+    def set_guesses(self, poses: np.ndarray) -> None:
+        """No-op: iSAM2 keeps its own estimate (a guess only places a node when it is added)."""
+
+    def update(self) -> tuple[np.ndarray, np.ndarray]:
+        self._inc.update()
+        self._estimate = self._inc.estimate()
+        return self._estimate
+
+    def final(self, warm_start: bool) -> GraphResult:
+        if self.params.robust.method != RobustMode.CONSENSUS:
+            return self._inc.result(classify=True)
+        # the final labels come from the batch consensus solve started at the iSAM2 estimate: the online gate
+        # tests loops against the drifted estimate at their arrival and rejects true loops under large drift
+        online = self._inc.result(classify=False)
+        data = self._inc.to_data()
+        data.poses = online.poses
+        res = optimize(data, self.params.replace(solver={"method": Solver.LM, "init": InitMethod.GIVEN}))
+        res.seconds += online.seconds
+        res.solver = Solver.ISAM2.value            # the strategy that produced the online estimates
+        res.notes.insert(0, f"iSAM2 pass {online.seconds:.3f} s, then the batch consensus solve from it")
         return res
-    return solve(data, params)
+
+    def to_data(self) -> PoseGraphData:
+        return self._inc.to_data()
+
+    def online_inliers(self) -> np.ndarray:
+        return self._inc.loop_inliers()
+
+    @property
+    def num_nodes(self) -> int:
+        return self._inc.num_nodes
+
+    @property
+    def num_loops(self) -> int:
+        return self._inc.num_loops
 
 
-def _tls_objective(data: PoseGraphData, res: GraphResult, params: GraphParams) -> float:
-    """cost(prior + odometry) + sum over loops of min(r^2, c^2) / 2 at the result (stated thresholds)."""
-    c2 = loop_thresholds(data.probability[res.loop_edges], TANGENT_DIM[data.dim], params)
-    r2 = np.asarray(res.loop_residual, float)
-    base = res.final_cost - 0.5 * float(r2[res.loop_inlier].sum())     # final_cost: prior + odometry + kept loops
-    return base + 0.5 * float(np.minimum(r2, c2).sum())
+STRATEGIES: dict[Solver, type[GraphStrategy]] = {Solver.LM: BatchStrategy, Solver.ISAM2: IncrementalStrategy}
 
 
+def strategy_class(params: GraphParams) -> type[GraphStrategy]:
+    """The strategy for `params.solver.method`."""
+    return STRATEGIES[params.solver.method]

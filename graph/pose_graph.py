@@ -1,4 +1,7 @@
-"""`PoseGraph`: build a graph node by node (odometry and loop closures marked explicitly), then optimise it."""
+"""`PoseGraph`: a graph built node by node (odometry and loop closures marked explicitly), as `PoseGraphData`.
+
+It is the store of the batch strategy of `RobustPoseGraph` (graph.optimizer) and a builder for files and tests;
+it does not solve: `RobustPoseGraph` (or `optimize(g.to_data())`) does."""
 from __future__ import annotations
 
 import os
@@ -7,7 +10,6 @@ import numpy as np
 
 from graph.formats import read_graph
 from graph.model import POSE_WIDTH, TANGENT_DIM, PoseGraphData, checked_edge, information_from
-from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.result import GraphResult, write_g2o
 
 
@@ -19,14 +21,13 @@ class PoseGraph:
         g.add_node(0, [0, 0, 0]); g.add_node(1)               # a node without a guess is placed by odometry
         g.add_odometry(0, 1, [1.0, 0.0, 0.1], cov)            # delta = pose 1 in the frame of pose 0
         k = g.add_loop(1, 0, delta, cov, probability=0.97)    # -> loop index k
-        res = g.optimize()                                     # GraphResult: poses, res.loop_inlier[k], ...
+        res = optimize(g.to_data())                            # GraphResult: poses, res.loop_inlier[k], ...
     """
 
-    def __init__(self, dim: int = 2, params: GraphParams | None = None):
+    def __init__(self, dim: int = 2):
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {dim}")
         self.dim = dim
-        self.params = params or GraphParams()
         self._ids: list[int] = []
         self._index: dict[int, int] = {}
         self._guess: list[np.ndarray] = []
@@ -40,8 +41,8 @@ class PoseGraph:
         self._loop_count = 0
 
     @classmethod
-    def from_data(cls, data: PoseGraphData, params: GraphParams | None = None) -> "PoseGraph":
-        g = cls(data.dim, params)
+    def from_data(cls, data: PoseGraphData) -> "PoseGraph":
+        g = cls(data.dim)
         for nid, p in zip(data.node_ids.tolist(), data.poses):
             g.add_node(nid, None if np.isnan(p).any() else p)
         for e in range(data.num_edges):
@@ -57,9 +58,9 @@ class PoseGraph:
         return g
 
     @classmethod
-    def read(cls, path: str | os.PathLike, params: GraphParams | None = None) -> "PoseGraph":
+    def read(cls, path: str | os.PathLike) -> "PoseGraph":
         """A g2o or TORO file; loops are the edges between non-consecutive vertices (see graph.model)."""
-        return cls.from_data(read_graph(path), params)
+        return cls.from_data(read_graph(path))
 
     # --------------------------------------------------------------------------------------------- building
     def add_node(self, node_id: int, guess: np.ndarray | None = None) -> None:
@@ -76,7 +77,7 @@ class PoseGraph:
 
     def set_guesses(self, poses: np.ndarray) -> None:
         """Replace every node's guess (one row per node, in the order added), e.g. with the previous solution
-        before a warm-started solve (`optimize(init="given")`)."""
+        before a warm-started solve (init "given")."""
         g = np.asarray(poses, float).reshape(len(self._ids), POSE_WIDTH[self.dim])
         if not np.all(np.isfinite(g)):
             raise ValueError("guesses must be finite")
@@ -131,14 +132,6 @@ class PoseGraph:
                              self._from, self._to, np.asarray(self._z).reshape(-1, w),
                              np.asarray(self._info).reshape(-1, d, d), lp,
                              np.where(lp, np.asarray(self._prob, float), 1.0), np.asarray(self._fixed, np.int64))
-
-    # ---------------------------------------------------------------------------------------------- solving
-    def optimize(self, solver: Solver | str | None = None, robust: RobustMode | str | None = None,
-                 init: InitMethod | str | None = None) -> GraphResult:
-        """Solve with `params` (keyword arguments override solver / robust mode / initial guess)."""
-        from graph.optimizer import optimize
-
-        return optimize(self.to_data(), self.params, solver=solver, robust=robust, init=init)
 
     def write_g2o(self, path: str | os.PathLike, result: GraphResult | None = None) -> None:
         """The graph as g2o (TORO for *.graph), vertices at the result's poses when given."""

@@ -8,11 +8,12 @@
     ids, poses = g.update()          # batch: a robust solve of what is there; iSAM2: insert what is pending
     ids, poses = g.estimate()        # the latest estimate, without solving
     res = g.result()                 # final GraphResult: every loop classified
-    RobustPoseGraph.solve(data)      # a whole PoseGraphData (files) in one call
+    RobustPoseGraph.solve(data)      # a whole PoseGraphData (files) in one call; the same as graph.optimize
 
-Strategies: `Solver.LM` (batch Levenberg-Marquardt; robust mode `consensus` by default, graph.robust) and
-`Solver.ISAM2` (graph.incremental: loops gated on arrival, classified at the end). Both keep the graph in the same
-`PoseGraphData` form, so `to_data()` and `write_g2o` work either way.
+The solver is a strategy object (graph.optimizer): `BatchStrategy` (`Solver.LM`) or `IncrementalStrategy`
+(`Solver.ISAM2`), chosen by `params.solver.method` or the `strategy` argument. The robust method is the batch
+solve's `LoopRejector` (graph.rejection), chosen by `params.robust.method`. Both strategies keep the graph in the
+same `PoseGraphData` form, so `to_data()` and `write_g2o` work either way.
 """
 from __future__ import annotations
 
@@ -20,11 +21,9 @@ import os
 
 import numpy as np
 
-from graph.incremental import IncrementalPoseGraph
 from graph.model import PoseGraphData
-from graph.optimizer import optimize
-from graph.params import GraphParams, InitMethod, RobustMode, Solver
-from graph.pose_graph import PoseGraph
+from graph.optimizer import GraphStrategy, optimize, strategy_class
+from graph.params import GraphParams, Solver
 from graph.result import GraphResult, write_g2o
 
 
@@ -34,19 +33,12 @@ class RobustPoseGraph:
     def __init__(self, dim: int = 2, params: GraphParams | None = None, strategy: Solver | str | None = None):
         self.params = (params or GraphParams()).replace(**({"solver": strategy} if strategy is not None else {}))
         self.dim = dim
-        self._batch = PoseGraph(dim, self.params)
-        self._inc: IncrementalPoseGraph | None = None
-        if self.params.solver.method == Solver.ISAM2:
-            inc = self.params
-            if inc.robust.method == RobustMode.CONSENSUS:      # the incremental pass classifies with its own GNC
-                inc = inc.replace(robust=RobustMode.GNC)
-            self._inc = IncrementalPoseGraph(dim, inc)
-        self._estimate: tuple[np.ndarray, np.ndarray] | None = None
-        self._result: GraphResult | None = None
+        self.strategy: GraphStrategy = strategy_class(self.params)(dim, self.params)
 
     @property
     def incremental(self) -> bool:
-        return self._inc is not None
+        """True for the online (iSAM2) strategy: `update()` is cheap and meant to be called as data arrives."""
+        return self.strategy.online
 
     @classmethod
     def solve(cls, data: PoseGraphData, params: GraphParams | None = None) -> GraphResult:
@@ -55,90 +47,55 @@ class RobustPoseGraph:
 
     # ------------------------------------------------------------------------------------------------ building
     def add_node(self, node_id: int, guess: np.ndarray | None = None) -> None:
-        self._batch.add_node(node_id, guess)
-        if self._inc is not None:
-            self._inc.add_node(node_id, guess)
+        """A new pose; without a guess it is placed by odometry."""
+        self.strategy.add_node(node_id, guess)
 
     def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None = None,
                      information: np.ndarray | None = None) -> None:
         """Odometry i -> j (trusted): delta = x_i^-1 x_j; cov or information in (x, y, theta) (3D: x y z rx ry rz)."""
-        self._batch.add_odometry(i, j, delta, cov, information)
-        if self._inc is not None:
-            self._inc.add_odometry(i, j, delta, cov, information)
+        self.strategy.add_odometry(i, j, delta, cov, information)
 
     def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None = None,
                  probability: float | None = None, information: np.ndarray | None = None) -> int:
         """Loop closure i -> j with P(loop) (None or NaN: unknown); returns its loop index (order added)."""
         p = None if probability is None or not np.isfinite(probability) else float(probability)
-        k = self._batch.add_loop(i, j, delta, cov, probability=p, information=information)
-        if self._inc is not None:
-            self._inc.add_loop(i, j, delta, cov, probability=p, information=information)
-        return k
+        if p is not None and not 0.0 <= p <= 1.0:
+            raise ValueError(f"loop probability must be in [0, 1], got {p}")
+        return self.strategy.add_loop(i, j, delta, cov, p, information)
 
     def set_guesses(self, poses: np.ndarray) -> None:
-        """Initial guesses of every node, in the order added (batch: the start of a warm-started solve)."""
-        self._batch.set_guesses(poses)
+        """Initial guesses of every node, in the order added (batch: the start of a warm-started solve; iSAM2
+        keeps its own estimate and ignores them)."""
+        self.strategy.set_guesses(poses)
 
     # ------------------------------------------------------------------------------------------------- solving
     def update(self) -> tuple[np.ndarray, np.ndarray]:
         """Bring the estimate up to date: iSAM2 inserts what is pending; batch solves the graph robustly."""
-        if self._inc is not None:
-            self._inc.update()
-            self._estimate = self._inc.estimate()
-        else:
-            res = self.result()
-            self._estimate = (res.node_ids, res.poses)
-        return self._estimate
+        return self.strategy.update()
 
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
         """(node ids, poses) of the latest estimate; before any solve, the nodes' guesses."""
-        if self._estimate is None:
-            data = self._batch.to_data()
-            return data.node_ids, data.poses
-        return self._estimate
+        return self.strategy.estimate()
 
     def loop_inliers(self) -> np.ndarray:
         """Current inlier flag of each loop: the last `result()` while no loop was added since; else iSAM2's online
-        gate and kernel (batch: every loop, until the first solve)."""
-        if self._result is not None and len(self._result.loop_inlier) == self.num_loops:
-            return np.asarray(self._result.loop_inlier, bool)
-        if self._inc is not None:
-            return self._inc.loop_inliers()
-        if self._result is None:
-            return np.ones(self._batch.num_loops, bool)
-        return np.asarray(self._result.loop_inlier, bool)
+        gate and kernel (batch: every loop until the first solve, then the last labels)."""
+        return self.strategy.loop_inliers()
 
     def result(self, warm_start: bool = False) -> GraphResult:
         """The final solve: every loop classified. warm_start (batch): start from the current guesses."""
-        if self._inc is not None and self.params.robust.method == RobustMode.CONSENSUS:
-            # the final labels come from the batch consensus solve started at the iSAM2 estimate: the online gate
-            # tests loops against the drifted estimate at their arrival and rejects true loops under large drift
-            online = self._inc.result(classify=False)
-            data = self._inc.to_data()
-            data.poses = online.poses
-            res = optimize(data, self.params.replace(solver={"method": Solver.LM, "init": InitMethod.GIVEN}))
-            res.seconds += online.seconds
-            res.solver = Solver.ISAM2.value            # the strategy that produced the online estimates
-            res.notes.insert(0, f"iSAM2 pass {online.seconds:.3f} s, then the batch consensus solve from it")
-        elif self._inc is not None:
-            res = self._inc.result(classify=True)
-        else:
-            data = self._batch.to_data()
-            res = optimize(data, self.params.replace(solver={"init": InitMethod.GIVEN}) if warm_start else self.params)
-        self._result = res
-        self._estimate = (res.node_ids, res.poses)
-        return res
+        return self.strategy.result(warm_start)
 
     def to_data(self) -> PoseGraphData:
-        return self._inc.to_data() if self._inc is not None else self._batch.to_data()
+        return self.strategy.to_data()
 
     def write_g2o(self, path: str | os.PathLike, result: GraphResult | None = None) -> None:
         write_g2o(path, self.to_data(), result)
 
     @property
     def num_nodes(self) -> int:
-        return self._batch.num_nodes
+        return self.strategy.num_nodes
 
     @property
     def num_loops(self) -> int:
-        return self._batch.num_loops
+        return self.strategy.num_loops
