@@ -84,7 +84,7 @@ def test_03_robust_pose_graph_rejects_the_false_loops(tmp_path):
     added = number(r"false loops: (\d+) added", out)
     rejected = number(r"added, (\d+) rejected", out)
     assert added >= 1 and rejected >= 0.8 * added
-    assert number(r"robust=gnc .*position RMSE vs truth ([\d.]+) m", out) < 0.5
+    assert number(r"robust=consensus.*position RMSE vs truth ([\d.]+) m", out) < 0.5
     assert read_graph(tmp_path / "opt.g2o").num_nodes == number(r"(\d+) nodes", out)
 
 
@@ -93,7 +93,7 @@ def test_03_robust_pose_graph_on_a_shared_file(shared_data, tmp_path):
     if not g2o.is_file():
         pytest.skip(f"{g2o} is not present")
     out = run_example("03_robust_pose_graph.py", g2o, "--out", tmp_path / "opt.g2o")
-    assert "robust=gnc" in out and read_graph(tmp_path / "opt.g2o").num_nodes == read_graph(g2o).num_nodes
+    assert "robust=consensus" in out and read_graph(tmp_path / "opt.g2o").num_nodes == read_graph(g2o).num_nodes
 
 
 def test_04_visual_memory_ranks_the_nearest_key_high():
