@@ -53,11 +53,14 @@ class HeightTracker:
         self.significance = float(significance)
         self._frames: deque[tuple[float, float, float]] = deque()  # (t, log_rel, variance)
         self._sum = 0.0
+        self._first_t: float | None = None
         self.tracked = 0    # keyframes put at a measured height
         self.nominal_keyframes = 0  # keyframes left at the nominal height (no significant departure)
 
     def observe(self, t: float, height: Height) -> None:
         """Add a frame's chained height; frames older than the window drop out of the mean."""
+        if self._first_t is None:
+            self._first_t = float(t)
         self._frames.append((float(t), height.log_rel, height.variance))
         self._sum += height.log_rel
         while len(self._frames) > 1 and self._frames[0][0] < t - self.window:
@@ -67,7 +70,10 @@ class HeightTracker:
         """(d, sigma_d): log of the frame's height over the window's mean height, and its standard deviation."""
         if not self._frames:
             return 0.0, math.inf
-        mean = self._sum / len(self._frames)
+        # before the window is full its mean is a poor estimate of the nominal level: the prior (the first frame's
+        # departure is unknown and zero-mean, so the first frame is at the nominal height) keeps the missing share
+        full = min(1.0, (self._frames[-1][0] - self._first_t) / self.window)
+        mean = full * self._sum / len(self._frames)
         var = max(height.variance - self._frames[0][2], 0.0)
         return height.log_rel - mean, math.sqrt(var)
 
