@@ -470,9 +470,14 @@ class VisualOdometry:
                               sigma_floor=c.pixel_sigma * self._m_per_px)
         if fit is not None and fit.n_inliers >= min_inliers and fit.inlier_ratio >= min_ratio and c.refine_tilt:
             h = self._abs_height(h_ref)
+            # the height changes smoothly: the previous frame's height relative to the reference is the prior mean
+            # of this one's (a zero mean would pull every measured change towards none: a biased chain)
+            s_prior = 0.0
+            if c.track_height and h_ref is not None:
+                s_prior = math.expm1(self._height.log_rel - h_ref.log_rel)
             tf = refine_planar_tilt(self.camera, ref_xn[fit.inliers], cur_xn[fit.inliers], fit.delta,
                                     c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px,
-                                    h_ref=None if h == self.camera.camera_height else h)
+                                    h_ref=None if h == self.camera.camera_height else h, s_prior=s_prior)
             if tf is not None:
                 fit.delta, fit.covariance, fit.rms, fit.sigma = tf.delta, tf.covariance, tf.rms, tf.sigma
                 if c.track_height and h_ref is not None:
