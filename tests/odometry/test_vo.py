@@ -311,7 +311,7 @@ def test_default_vo_follows_the_height_of_a_bouncing_camera(tex):
     for name, cfg in (("default", VOConfig()), ("nominal", VOConfig(track_height=False))):
         traj = run_visual_odometry(cam, np.arange(len(imgs)) / FPS, lambda i: imgs[i], cfg)
         errors[name] = _segment_error(traj.poses, poses, start=240)
-    assert errors["default"] < 0.6 * errors["nominal"], errors
+    assert errors["default"] < 0.75 * errors["nominal"], errors
 
 
 def test_a_steady_camera_keeps_its_nominal_height(tex):
