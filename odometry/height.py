@@ -53,6 +53,7 @@ class HeightTracker:
         self.significance = float(significance)
         self._frames: deque[tuple[float, float, float]] = deque()  # (t, log_rel, variance)
         self._sum = 0.0
+        self._sum2 = 0.0
         self._first_t: float | None = None
         self.tracked = 0    # keyframes put at a measured height
         self.nominal_keyframes = 0  # keyframes left at the nominal height (no significant departure)
@@ -63,8 +64,11 @@ class HeightTracker:
             self._first_t = float(t)
         self._frames.append((float(t), height.log_rel, height.variance))
         self._sum += height.log_rel
+        self._sum2 += height.log_rel ** 2
         while len(self._frames) > 1 and self._frames[0][0] < t - self.window:
-            self._sum -= self._frames.popleft()[1]
+            old = self._frames.popleft()[1]
+            self._sum -= old
+            self._sum2 -= old ** 2
 
     def departure(self, height: Height) -> tuple[float, float]:
         """(d, sigma_d): log of the frame's height over the window's mean height, and its standard deviation."""
@@ -73,9 +77,13 @@ class HeightTracker:
         # before the window is full its mean is a poor estimate of the nominal level: the prior (the first frame's
         # departure is unknown and zero-mean, so the first frame is at the nominal height) keeps the missing share
         full = min(1.0, (self._frames[-1][0] - self._first_t) / self.window)
-        mean = full * self._sum / len(self._frames)
-        var = max(height.variance - self._frames[0][2], 0.0)
-        return height.log_rel - mean, math.sqrt(var)
+        n = len(self._frames)
+        mean = self._sum / n
+        # the chain's own noise over the window, and what the missing share of the anchor may be off by: the
+        # first frame's departure, as large as the heights seen so far vary
+        spread2 = max(self._sum2 / n - mean * mean, 0.0)
+        var = max(height.variance - self._frames[0][2], 0.0) + (1.0 - full) ** 2 * spread2
+        return height.log_rel - full * mean, math.sqrt(var)
 
     def anchor(self, height: Height) -> Height:
         """The height a new keyframe started by this frame is given: the measured departure from the nominal
