@@ -11,7 +11,9 @@ observable from images, and the chain's errors add up like a random walk. So:
   unevenness or an altitude hold average out over that time): the departure of a frame is
   d = log_rel - mean(log_rel over the window);
 - d is used only when it is significant: |d| > `significance` * sigma_d, with sigma_d^2 the variance the chain
-  accumulated over the window (the links' own variances, from the refinement). Otherwise the keyframe is put at
+  accumulated over the window (the links' own variances, from the refinement) plus, before the window is full,
+  the uncertainty of the anchor (its missing share times the spread of the heights seen so far: the first
+  frame's own departure is not known). Otherwise the keyframe is put at
   the nominal height, as without tracking. A camera whose height does not vary measurably (or whose measured
   changes are as large as their noise) keeps the nominal height; one that bounces or climbs gets it followed.
 """
