@@ -68,3 +68,18 @@ def test_moved_chains_ratios_and_variances_and_never_flips_the_scale():
     assert math.isclose(h.log_rel, math.log(1.01 * 0.98))
     assert math.isclose(h.variance, 3e-6)
     assert Height(0.5).moved(-3.0, 0.0).metres > 0
+
+
+def test_before_the_window_is_full_the_anchor_uncertainty_holds_back_a_departure():
+    """2 s into a 10 s window, heights seen so far spread by ~0.5 %: a 0.6 % departure could be the first frame's own
+    offset (unknown), so it is not used; once the window is full the same departure (the chain being exact) is."""
+    def departure_used(seconds: float) -> bool:
+        tr = HeightTracker(NOMINAL, 10.0, 3.0)
+        t = np.arange(0.0, seconds, 1 / FPS)
+        for k, tk in enumerate(t):
+            tr.observe(tk, Height(NOMINAL, 0.005 * (-1) ** k, 1e-12 * k))
+        before = tr.tracked
+        tr.anchor(Height(NOMINAL, 0.006, 1e-12 * len(t)))
+        return tr.tracked > before
+    assert not departure_used(2.0)
+    assert departure_used(12.0)
