@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from odometry.height import Height
 from odometry.shared.ransac import find_consensus, refine_iteratively, sample_pairs
 
 
@@ -26,7 +27,8 @@ class RigidFit:
         inliers: (N,) bool mask over the input pairs.
         rms: root-mean-square inlier residual (same unit as the points).
         sigma: per-axis residual standard deviation used for the covariance.
-        height: the camera height of the `src` frame when a refinement estimated it (None otherwise).
+        height: the camera height (`odometry.height.Height`) of the `src` frame when a refinement measured it
+            (None otherwise).
     """
 
     delta: np.ndarray
@@ -34,7 +36,7 @@ class RigidFit:
     inliers: np.ndarray
     rms: float
     sigma: float
-    height: float | None = None
+    height: Height | None = None
 
     @property
     def n_inliers(self) -> int:

@@ -37,6 +37,7 @@ class TiltFit:
     sigma: float
     rms: float
     iterations: int
+    height_variance: float = 0.0  # marginal variance of s (the tilts unknown): how well the data fix the height
 
 
 def _floor(camera: CameraModel, xn: np.ndarray, heights: np.ndarray, tilts: np.ndarray) -> np.ndarray:
@@ -126,4 +127,4 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
         return None
     cov = 0.5 * (cov_full[:3, :3] + cov_full[:3, :3].T)
     return TiltFit(delta=q[:3].copy(), covariance=cov, params=q, sigma=sigma, rms=math.sqrt(rss / n),
-                   iterations=it)
+                   iterations=it, height_variance=float(cov_full[7, 7]))

@@ -30,6 +30,7 @@ import numpy as np
 
 from odometry.descriptor_path import Features, match_features, orb_features
 from odometry.errors import OdometryError
+from odometry.height import Height, HeightTracker
 from odometry.rigid import RigidFit, kabsch_2d, ransac_rigid_2d
 from odometry.shared.camera import CameraModel
 from odometry.shared.config import Config, ConfigError, setting
@@ -187,12 +188,18 @@ class VOConfig(Config):
                                    doc="frames after a loss during which each frame tries to re-attach to them")
     # the camera height is not constant (suspension, floor unevenness; a drone's altitude hold): a height error is
     # a scale error of every motion. The tilt refinement measures each frame's height relative to its keyframe;
-    # chaining those ratios gives it relative to the first frame, and the mean over the run so far is taken to
-    # be the nominal camera_height (the first frame's own height is not known).
-    # off by default: measured, it halves the drift where the height wobbles 1 % without tilt (the independent
-    # renderer: 0.47 -> 0.26 % per 1 m) but raises it where tilt wobble is confounded with it (our simulator's
-    # natural floors: 0.106 -> 0.153 %), and the 30 fps fast path must not lose accuracy
-    track_height: bool = setting(False, doc="estimate the camera height frame by frame (needs refine_tilt)")
+    # a new keyframe gets the chained height when it departs significantly from the mean over `height_window`
+    # (taken to be the nominal camera_height), else the nominal height (odometry.height)
+    track_height: bool = setting(True, doc="estimate the camera height frame by frame (needs refine_tilt)")
+    # the bounce of a suspension or of floor unevenness decorrelates within a few seconds, a drone's altitude hold
+    # within ~10 s: over this window the height is taken to average to camera_height. The chain's random-walk
+    # error grows with it, the bias of a slow height change shrinks with it.
+    height_window: float = setting(10.0, range="(0, inf)", unit="s",
+                                   doc="time over which the camera height is taken to average to camera_height")
+    # the departure is the chained log height minus its window mean; sigma is what the chained measurements'
+    # own variances allow within the window. 3 sigma: a measurement-noise departure is used 0.3 % of the time
+    height_significance: float = setting(3.0, range="[0, inf)", unit="sigma",
+                                         doc="a keyframe's measured height departure below this is not used")
     seed: int = setting(0, range="[0, inf)")
 
     def check(self) -> None:
@@ -271,7 +278,7 @@ class _Keyframe:
     xn: np.ndarray       # (N, 2) their undistorted normalised coordinates
     floor: np.ndarray    # (N, 2) their floor points in the keyframe's base frame
     orb: Features | None = None  # ORB features, computed when the descriptor path first needs them
-    height: float = 1.0          # camera height at this frame relative to the first frame's (track_height)
+    height: Height | None = None  # its camera height (None: the nominal camera_height)
 
 
 class VisualOdometry:
@@ -312,11 +319,10 @@ class VisualOdometry:
         self._unanchored_since: int | None = None
         self._frame_orb: Features | None = None   # ORB features of the frame being processed, when computed
         self._gate: tuple[np.ndarray, np.ndarray] | None = None  # fallback motion since the previous frame + cov
-        # camera heights relative to the first frame's: of the previous frame, of the frame being processed, and
-        # their time-weighted mean so far, which is taken to be the nominal camera_height
-        self._height = 1.0
-        self._frame_height = 1.0
-        self._h_mean, self._h_int, self._t_int = 1.0, 0.0, 0.0
+        # camera heights (odometry.height) of the previous frame and of the frame being processed
+        self._height = Height(camera.camera_height)
+        self._frame_height = self._height
+        self.heights = HeightTracker(camera.camera_height, self.config.height_window, self.config.height_significance)
 
     # ------------------------------------------------------------------ public state
     @property
@@ -422,7 +428,9 @@ class VisualOdometry:
                 reason_out.reason = f"too few corners for a keyframe ({len(pts)} < {c.min_features})"
             return False
         xn = self.camera.normalize(pts)
-        h = self._frame_height
+        h = self.heights.anchor(self._frame_height) if self.config.track_height else None
+        if h is not None:
+            self._frame_height = h
         self._kf = _Keyframe(index=index, timestamp=timestamp, gray=gray, pts=pts, xn=xn,
                              floor=self._floor(xn, h), orb=self._frame_orb, height=h)
         self._t_kp = np.zeros(3)
@@ -433,25 +441,24 @@ class VisualOdometry:
             self._bank = (self._bank + [self._kf])[-c.reacquire_keyframes:]
         return True
 
-    def _abs_height(self, rel: float | None) -> float:
-        """Metres of a relative height: the mean relative height so far is the nominal camera_height."""
-        h0 = self.camera.camera_height
-        if rel is None or not self.config.track_height:
-            return h0
-        return h0 * rel / self._h_mean
+    def _abs_height(self, height: Height | None) -> float:
+        """Metres of a frame's height (the nominal camera_height without height tracking)."""
+        if height is None or not self.config.track_height:
+            return self.camera.camera_height
+        return height.metres
 
-    def _floor(self, xn: np.ndarray, rel_height: float | None) -> np.ndarray:
-        """Floor points of rays for the camera at a relative height (nominal: `CameraModel.rays_to_floor`)."""
-        h = self._abs_height(rel_height)
+    def _floor(self, xn: np.ndarray, height: Height | None) -> np.ndarray:
+        """Floor points of rays for the camera at a height (nominal: `CameraModel.rays_to_floor`)."""
+        h = self._abs_height(height)
         if h == self.camera.camera_height:
             return self.camera.rays_to_floor(xn)
         return self.camera.rays_to_floor_batch(xn, [h], [self.camera.tilt])[0]
 
     def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray, ref_floor: np.ndarray,
              threshold_px: float | None = None, min_inliers: int | None = None,
-             min_ratio: float | None = None, h_ref: float | None = None) -> RigidFit | None:
-        """RANSAC + Kabsch on floor points (cur -> ref, both at the reference's relative height `h_ref`), then the
-        tilt-aware refinement on the inliers, which also measures the current frame's relative height
+             min_ratio: float | None = None, h_ref: Height | None = None) -> RigidFit | None:
+        """RANSAC + Kabsch on floor points (cur -> ref, both at the reference's height `h_ref`), then the
+        tilt-aware refinement on the inliers, which also measures the current frame's height relative to it
         (`RigidFit.height`, with track_height)."""
         c = self.config
         threshold_px = c.ransac_threshold_px if threshold_px is None else threshold_px
@@ -463,13 +470,18 @@ class VisualOdometry:
                               sigma_floor=c.pixel_sigma * self._m_per_px)
         if fit is not None and fit.n_inliers >= min_inliers and fit.inlier_ratio >= min_ratio and c.refine_tilt:
             h = self._abs_height(h_ref)
+            # the height changes smoothly: the previous frame's height relative to the reference is the prior mean
+            # of this one's (a zero mean would pull every measured change towards none: a biased chain)
+            s_prior = 0.0
+            if c.track_height and h_ref is not None:
+                s_prior = math.expm1(self._height.log_rel - h_ref.log_rel)
             tf = refine_planar_tilt(self.camera, ref_xn[fit.inliers], cur_xn[fit.inliers], fit.delta,
                                     c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px,
-                                    h_ref=None if h == self.camera.camera_height else h)
+                                    h_ref=None if h == self.camera.camera_height else h, s_prior=s_prior)
             if tf is not None:
                 fit.delta, fit.covariance, fit.rms, fit.sigma = tf.delta, tf.covariance, tf.rms, tf.sigma
                 if c.track_height and h_ref is not None:
-                    fit.height = h_ref * (1.0 + float(tf.params[7]))
+                    fit.height = h_ref.moved(float(tf.params[7]), tf.height_variance)
         self._fit_seconds += time.perf_counter() - t0
         if fit is None or fit.n_inliers < min_inliers or fit.inlier_ratio < min_ratio:
             return None
@@ -478,7 +490,7 @@ class VisualOdometry:
 
     def _track(self, ref_gray: _Images, ref_px: np.ndarray, ref_xn: np.ndarray, ref_floor: np.ndarray,
                gray: _Images, t_ref_cur: np.ndarray, shift: np.ndarray | None = None, levels: int | None = None,
-               h_ref: float | None = None) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
+               h_ref: Height | None = None) -> tuple[RigidFit | None, np.ndarray, np.ndarray, np.ndarray]:
         """LK from a reference frame, started at the positions predicted by the motion t_ref_cur (or by a global
         image `shift` when given); then the robust fit. A large predicted rotation is taken out of the current
         frame first (LK windows do not rotate)."""
@@ -779,10 +791,8 @@ class VisualOdometry:
         self._poses.append(est.pose)
         self._covs.append(np.asarray(est.covariance, float))
         self._height = self._frame_height
-        if dt and self.config.track_height:
-            self._h_int += self._height * dt
-            self._t_int += dt
-            self._h_mean = self._h_int / self._t_int
+        if self.config.track_height:
+            self.heights.observe(timestamp, self._height)
         if est.status == VOStatus.OK:
             self._failures = 0
             if dt and est.reference != Reference.REACQUIRED:  # a re-attachment jump is no velocity

@@ -45,13 +45,18 @@ def shared_dir() -> Path:
 
 TEXTURES = ("skimage_cc0/gravel.png", "gazebo_models_ccby3/cloverleaf_interchange__concrete.png",
             "gazebo_models_ccby3/cloverleaf_interchange__grass.png", "aws_robomaker_mit0/racetrack_Ground_01_grass_dirt.png",
-            "skimage_cc0/grass.png", "gazebo_models_ccby3/vrc_driving_terrain__grass_dry.png")
+            "skimage_cc0/grass.png", "gazebo_models_ccby3/vrc_driving_terrain__grass_dry.png",
+            "gazebo_models_ccby3/cloverleaf_interchange__road.png", "gazebo_models_ccby3/robocup09_spl_field__carpet.jpg",
+            "aws_robomaker_mit0/house_FloorB_01_wood_planks.png", "skimage_cc0/brick.png")
 # tuning half (looked at while developing the descriptor path; e.g. a wrong ORB-only re-acquisition on seed 2 led
 # to LK confirmation, a lost lane change on seed 13 to descriptors on the previous frame with its own corners):
 # render_floor seeds 1-3, our lanes seeds 11 and 13, and the default demo sequence (carpet, seed 0) used to choose
-# the height tracking. The rest is the reporting half.
+# the height tracking. The camera height tracking (odometry.height) was developed on render_floor at 30 fps with
+# grass+dry-grass s21 and road+carpet s22, and on our simulator's carpet/concrete/tiles/asphalt seeds 40-45
+# (never on the `vslam bench odometry` sequences, seeds 0-3). The rest is the reporting half.
 TUNING = {"render_floor gravel+concrete s1 1/22", "ours lanes grass h40 s11", "render_floor lawn+grass-dirt s2 1/22",
-          "render_floor grass+dry-grass s3 1/38", "ours lanes gravel h100 0.1Hz 60% s13"}
+          "render_floor grass+dry-grass s3 1/38", "ours lanes gravel h100 0.1Hz 60% s13",
+          "render_floor grass+dry-grass s21 30fps", "render_floor road+carpet s22 30fps"}
 
 
 @dataclass(frozen=True)
@@ -136,7 +141,10 @@ def regimes() -> list[Regime]:
     for name, cfg in hi.items():
         r.append(Regime(name, "ours", _ours(cfg, name)))
     for name, (tex, seed) in {"render_floor gravel+concrete s4 30fps": ((0, 1), 4),
-                              "render_floor lawn+grass-dirt s5 30fps": ((2, 3), 5)}.items():
+                              "render_floor lawn+grass-dirt s5 30fps": ((2, 3), 5),
+                              "render_floor wood-planks+brick s23 30fps": ((8, 9), 23),
+                              "render_floor grass+dry-grass s21 30fps": ((4, 5), 21),
+                              "render_floor road+carpet s22 30fps": ((6, 7), 22)}.items():
         r.append(Regime(name, "render_floor", _render_floor(tex, seed, 1, name), fallback=True))
     return r
 
@@ -206,7 +214,7 @@ def table(rows: list[dict]) -> str:
 
 def targets(rows: list[dict]) -> dict:
     low = [r for r in rows if r["low_rate"] and r["half"] == "reporting"]
-    hi = [r for r in rows if r["renderer"] == "render_floor" and not r["low_rate"]]
+    hi = [r for r in rows if r["renderer"] == "render_floor" and not r["low_rate"] and r["half"] == "reporting"]
     return {"low_rate_every_frame_by_vision": all(r["vo"]["by_vision"] == r["frames"] - 1 for r in low),
             "low_rate_ate_le_1pct": all(r["vo"]["ate_pct"] <= 1.0 for r in low),
             "render_floor_30fps_drift_le_0.3pct": all(r["vo"]["drift_1m_pct"] <= 0.3 for r in hi)}

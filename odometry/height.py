@@ -1,0 +1,98 @@
+"""The camera height of a downward VO, frame by frame: measured relative changes, anchored to the nominal height,
+used only where the data show a significant departure from it.
+
+A height error is a scale error of every motion. The planar refinement (`odometry.tilt_refine`) measures each
+frame's height relative to its keyframe (the scale change of the view, the tilts marginalised, with its variance).
+Within a keyframe that ratio is already applied; what is left is the keyframe's own height. Chaining the ratios
+gives every frame's height relative to the first frame (`Height.log_rel`), but the absolute level is not
+observable from images, and the chain's errors add up like a random walk. So:
+
+- the nominal `camera_height` is taken to be the mean height over the last `window` seconds (a bounce, floor
+  unevenness or an altitude hold average out over that time): the departure of a frame is
+  d = log_rel - mean(log_rel over the window);
+- d is used only when it is significant: |d| > `significance` * sigma_d, with sigma_d^2 the variance the chain
+  accumulated over the window (the links' own variances, from the refinement) plus, before the window is full,
+  the uncertainty of the anchor (its missing share times the spread of the heights seen so far: the first
+  frame's own departure is not known). Otherwise the keyframe is put at
+  the nominal height, as without tracking. A camera whose height does not vary measurably (or whose measured
+  changes are as large as their noise) keeps the nominal height; one that bounces or climbs gets it followed.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+__all__ = ["Height", "HeightTracker"]
+
+
+@dataclass(frozen=True)
+class Height:
+    """A frame's camera height: `metres` (used for its geometry), `log_rel` = log of its height relative to the
+    first frame (chained measurements) and `variance` of log_rel (the sum of the chained links' variances)."""
+
+    metres: float
+    log_rel: float = 0.0
+    variance: float = 0.0
+
+    def moved(self, ratio_minus_one: float, variance: float) -> Height:
+        """The height of a frame measured at (1 + s) times this one, with the variance of s."""
+        s = max(ratio_minus_one, -0.5)   # a refinement gone astray must not flip the sign of the scale
+        return Height(self.metres * (1.0 + s), self.log_rel + math.log1p(s), self.variance + max(variance, 0.0))
+
+
+class HeightTracker:
+    """The time window of chained relative heights and the significance test that anchors a keyframe.
+
+    >>> tr = HeightTracker(0.5, window=10.0, significance=3.0)
+    >>> tr.observe(t, frame_height)            # every frame
+    >>> kf_height = tr.anchor(frame_height)    # when the frame starts a keyframe
+    """
+
+    def __init__(self, nominal: float, window: float, significance: float) -> None:
+        self.nominal = float(nominal)
+        self.window = float(window)
+        self.significance = float(significance)
+        self._frames: deque[tuple[float, float, float]] = deque()  # (t, log_rel, variance)
+        self._sum = 0.0
+        self._sum2 = 0.0
+        self._first_t: float | None = None
+        self.tracked = 0    # keyframes put at a measured height
+        self.nominal_keyframes = 0  # keyframes left at the nominal height (no significant departure)
+
+    def observe(self, t: float, height: Height) -> None:
+        """Add a frame's chained height; frames older than the window drop out of the mean."""
+        if self._first_t is None:
+            self._first_t = float(t)
+        self._frames.append((float(t), height.log_rel, height.variance))
+        self._sum += height.log_rel
+        self._sum2 += height.log_rel ** 2
+        while len(self._frames) > 1 and self._frames[0][0] < t - self.window:
+            old = self._frames.popleft()[1]
+            self._sum -= old
+            self._sum2 -= old ** 2
+
+    def departure(self, height: Height) -> tuple[float, float]:
+        """(d, sigma_d): log of the frame's height over the window's mean height, and its standard deviation."""
+        if not self._frames:
+            return 0.0, math.inf
+        # before the window is full its mean is a poor estimate of the nominal level: the prior (the first frame's
+        # departure is unknown and zero-mean, so the first frame is at the nominal height) keeps the missing share
+        full = min(1.0, (self._frames[-1][0] - self._first_t) / self.window)
+        n = len(self._frames)
+        mean = self._sum / n
+        # the chain's own noise over the window, and what the missing share of the anchor may be off by: the
+        # first frame's departure, as large as the heights seen so far vary
+        spread2 = max(self._sum2 / n - mean * mean, 0.0)
+        var = max(height.variance - self._frames[0][2], 0.0) + (1.0 - full) ** 2 * spread2
+        return height.log_rel - full * mean, math.sqrt(var)
+
+    def anchor(self, height: Height) -> Height:
+        """The height a new keyframe started by this frame is given: the measured departure from the nominal
+        height when it is significant, else the nominal height (the chain itself is kept either way)."""
+        d, sigma = self.departure(height)
+        if len(self._frames) > 1 and abs(d) > self.significance * sigma:
+            self.tracked += 1
+            return Height(self.nominal * math.exp(d), height.log_rel, height.variance)
+        self.nominal_keyframes += 1
+        return Height(self.nominal, height.log_rel, height.variance)
