@@ -48,6 +48,11 @@ class MotionSource:
     relative: Callable[[int, int], tuple[np.ndarray, np.ndarray]]
 
 
+def _height(seq: Sequence) -> float:
+    """The camera height (m) that scales the drift model's heading drift; 1 (per metre) without one."""
+    return float(seq.camera.camera_height) if seq.camera is not None and seq.camera.camera_height else 1.0
+
+
 def _tum_motion(seq: Sequence, path: Path, gate: MotionGateParams) -> MotionSource:
     """A TUM trajectory (e.g. `vslam odometry`'s trajectory_vo.txt), interpolated at the frame times."""
     try:
@@ -59,7 +64,7 @@ def _tum_motion(seq: Sequence, path: Path, gate: MotionGateParams) -> MotionSour
     if len(missing):
         raise VslamError(f"{path}: field 'timestamp': no pose at frame {int(missing[0])} "
                          f"(t = {float(seq.timestamps[missing[0]]):.6f}, outside the trajectory's time span)")
-    return MotionSource(f"tum:{path}", poses, ChainMotion(poses, gate.drift))
+    return MotionSource(f"tum:{path}", poses, ChainMotion(poses, gate.drift, height=_height(seq)))
 
 
 def motion_source(seq: Sequence, odometry: str, gate: MotionGateParams) -> MotionSource | None:
@@ -81,7 +86,7 @@ def motion_source(seq: Sequence, odometry: str, gate: MotionGateParams) -> Motio
         return None
     traj = run_visual_odometry(seq.camera, seq.timestamps, lambda i: seq.image(i, gray=True), VOConfig())
     lost = np.array([s == VOStatus.LOST for s in traj.status])   # motion not measured: the gate cannot judge
-    return MotionSource("vo", traj.poses, ChainMotion(traj.poses, gate.drift, unknown=lost))
+    return MotionSource("vo", traj.poses, ChainMotion(traj.poses, gate.drift, unknown=lost, height=_height(seq)))
 
 
 @dataclass(frozen=True)

@@ -37,16 +37,18 @@ class DriftModel(Config):
 
     Defaults: a 2 % scale error (camera height known to 2 %; four times the worst VO drift per metre measured on
     floors, 0.5 %) and a gyro-like heading scale error of 2 % of every turn (a 1-3 % heading drift stays within
-    1.5 sigma) plus 0.11 deg per metre on straight lines (ten times the heading drift of our VO over 110 m of the
-    independent renderer's printed floor)."""
+    1.5 sigma) plus 0.001 rad per camera height travelled on straight lines (0.11 deg per metre at 0.5 m: ten times
+    the heading drift of our VO over 110 m of the independent renderer's printed floor). Visual odometry errs per
+    frame, i.e. per image footprint, so its heading drift scales with the camera height, not with metres."""
 
     trans_fraction: float = setting(0.02, range="[0, inf)", unit="m/m",
                                     doc="position error per metre of displacement between the two poses (scale "
                                         "error)")
     turn_fraction: float = setting(0.01, range="[0, inf)", unit="rad/rad",
                                    doc="heading error per radian turned (heading scale error)")
-    heading_rad_per_m: float = setting(0.002, range="[0, inf)", unit="rad/m",
-                                       doc="heading error per metre travelled (heading drift on straight lines)")
+    heading_rad_per_height: float = setting(0.001, range="[0, inf)", unit="rad per camera height travelled",
+                                            doc="heading drift on straight lines (without a camera height: per "
+                                                "metre)")
     floor_sigma_m: float = setting(0.01, range="(0, inf)", unit="m",
                                    doc="position sigma however short the way (keeps the gate finite at rest)")
 
@@ -65,6 +67,9 @@ class MotionGateParams(Config):
                                           "squared is this much larger (6.63 = chi-square 1 dof at 99 %); "
                                           "else none")
     drift: DriftModel = field(default_factory=DriftModel)
+    drift_in_graph: bool = setting(True, doc="pipeline: the pose graph's odometry edges carry the drift model's "
+                                             "per-step variance too (the VO's own covariance is random noise only: "
+                                             "beside it, true loops look inconsistent and the back end drops them)")
 
 
 @dataclass(frozen=True)
@@ -74,20 +79,30 @@ class GateResult:
     fit: LoopPose | None          # the loop's floor motion (pose of the query in the candidate's frame)
 
 
+def step_drift_covariance(step: np.ndarray, drift: DriftModel, height: float = 1.0) -> np.ndarray:
+    """The drift model's variance of one odometry step (x, y, theta), as independent noise: a pose-graph edge."""
+    d = float(np.hypot(step[0], step[1]))
+    s_th = drift.turn_fraction * abs(float(wrap_angle(float(step[2])))) + drift.heading_rad_per_height * d / height
+    s_xy = drift.trans_fraction * d
+    return np.diag([s_xy ** 2, s_xy ** 2, s_th ** 2])
+
+
 UNKNOWN_SIGMA = 1e6    # m / rad: "no information" across a step whose motion was not measured
 
 
 class ChainMotion:
     """Relative motion between two poses of a chain (per frame or per keyframe) and its drift-aware covariance.
 
-    `poses` (N, 3) in increasing key order, `keys` (N,) their frame ids (default 0..N-1). `step_cov` (N, 3, 3):
+    `poses` (N, 3) in increasing key order, `keys` (N,) their frame ids (default 0..N-1), `height` the camera
+    height (m; the unit of distance of `DriftModel.heading_rad_per_height`). `step_cov` (N, 3, 3):
     covariance of the step from pose i-1 to pose i in the frame of pose i-1 (the odometry's own, random part;
     None: none). `unknown` (N,): the step into pose i was not measured (VO lost); across one, the relative motion
     is unknown and the gate leaves the decision to appearance."""
 
     def __init__(self, poses: np.ndarray, drift: DriftModel | None = None, keys: np.ndarray | None = None,
-                 step_cov: np.ndarray | None = None, unknown: np.ndarray | None = None):
+                 step_cov: np.ndarray | None = None, unknown: np.ndarray | None = None, height: float = 1.0):
         self.poses = np.asarray(poses, float).reshape(-1, 3)
+        self.height = float(height)
         self.drift = drift or DriftModel()
         n = len(self.poses)
         self.keys = np.arange(n) if keys is None else np.asarray(keys, int).reshape(-1)
@@ -119,7 +134,7 @@ class ChainMotion:
         step = np.linalg.norm(np.diff(xy, axis=0), axis=1)             # (m,) step lengths
         turn = np.abs(wrap_angle(np.diff(th)))                          # (m,) turns
         lever = xy[-1] - xy[1:]                                         # (m, 2) step end -> last position
-        s_heading = d.turn_fraction * turn + d.heading_rad_per_m * step  # per step
+        s_heading = d.turn_fraction * turn + d.heading_rad_per_height * step / self.height   # per step
         # biases: errors of one sign along the way, so sigmas add (not variances)
         # a scale error moves the end by a fraction of the displacement (it cancels around a closed loop); a heading
         # error made at step k moves every later position by its lever arm to the end

@@ -25,7 +25,7 @@ from vslam.errors import VslamError
 from vslam.pipeline.backend import backend_graph, floored
 from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import LoopPose, loop_pose
-from vslam.pipeline.motion_gate import ChainMotion, MotionGate
+from vslam.pipeline.motion_gate import ChainMotion, MotionGate, step_drift_covariance
 from vslam.pipeline.outputs import write_outputs
 from vslam.pipeline.prefetch import prefetch
 from vslam.pipeline.recognizers import build_loop_detector
@@ -220,7 +220,10 @@ class Pipeline:
             self.kf_slam.append(guess)
             self.kf_step_cov.append(floored(cov))
             self.graph.add_node(index, guess)
-            self.graph.add_odometry(prev, index, between(self.poses_vo[prev], self.poses_vo[index]), floored(cov))
+            rel = between(self.poses_vo[prev], self.poses_vo[index])
+            odo_cov = cov if not self.config.loops.gate.drift_in_graph else \
+                cov + step_drift_covariance(rel, self.config.loops.gate.drift, self.camera.camera_height)
+            self.graph.add_odometry(prev, index, rel, floored(odo_cov))
         else:
             self.keyframes.append(index)
             self.kf_slam.append(self.poses_vo[index].copy())
@@ -275,7 +278,7 @@ class Pipeline:
         ib = int(np.searchsorted(self.keyframes, b))
         kfs = self.keyframes[ia:ib + 1]
         chain = ChainMotion(np.array([self.poses_vo[k] for k in kfs]), self.config.loops.gate.drift, keys=kfs,
-                            step_cov=np.array(self.kf_step_cov[ia:ib + 1]))
+                            step_cov=np.array(self.kf_step_cov[ia:ib + 1]), height=self.camera.camera_height)
         return chain(a, b)
 
     def _maybe_optimize(self, force: bool = False) -> None:
