@@ -19,6 +19,8 @@ from odometry.shared.tum import tum_to_se2
 from vslam.errors import ImageReadError, VslamError
 from vslam.image_file import read_image_file
 
+EXACT_STAMP_S = 1e-6    # s: stamps this close name the same instant (TUM text keeps 6 decimals)
+
 
 @dataclass(frozen=True)
 class WheelOdometry:
@@ -66,8 +68,13 @@ class Trajectory:
         out = np.full((len(t), 3), np.nan)
         if len(ts) == 0:
             return out
-        i = np.searchsorted(ts, t, side="right") - 1
-        exact = (i >= 0) & (i < len(ts)) & (ts[np.clip(i, 0, len(ts) - 1)] == t)
+        # a stamp within 1 us of a pose is that pose: TUM files carry 6 decimals, frames.csv may carry more (a
+        # 0.14 Hz frame at 7.142857142857 s against ground truth at 7.142857 s), and at a low rate the gap to the
+        # next pose is wider than max_gap
+        j = np.clip(np.searchsorted(ts, t - EXACT_STAMP_S, side="left"), 0, len(ts) - 1)
+        near = np.abs(ts[j] - t) <= EXACT_STAMP_S
+        i = np.where(near, j, np.searchsorted(ts, t, side="right") - 1)
+        exact = near
         out[exact] = p[i[exact]]
         inside = (i >= 0) & (i < len(ts) - 1) & ~exact
         if np.any(inside):

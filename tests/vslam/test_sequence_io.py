@@ -17,6 +17,7 @@ from vslam.errors import (
     UnknownColumnError,
 )
 from vslam.io import open_sequence, read_camera_yaml, write_sequence
+from vslam.sequence import Trajectory
 
 CAMERA_YAML = """width: 64
 height: 48
@@ -245,3 +246,16 @@ def test_real_kitti_snippet(shared_data):
     assert len(seq) == 51 and seq.camera.fx == pytest.approx(707.0912)
     assert seq.image(0, gray=True).shape == (370, 1226)
     assert 55 < seq.path_length() < 65                                     # ~60 m of driving (SOURCE.txt)
+
+
+def test_ground_truth_at_low_rate_frames_written_with_six_decimals():
+    """A 0.14 Hz sequence: frames.csv keeps 7.142857142857 s, the TUM ground truth 7.142857 s, and the next pose is
+    7 s away (beyond max_gap): the frame still gets its pose (it was NaN, so evaluation had no ground truth)."""
+    t_frames = np.arange(5) / 0.14
+    t_gt = np.round(t_frames, 6)
+    poses = np.zeros((5, 7))
+    poses[:, 0] = 14.0 * np.arange(5)
+    poses[:, 6] = 1.0
+    gt = Trajectory(t_gt, poses).planar_at(t_frames, max_gap=0.5)
+    assert np.allclose(gt[:, 0], 14.0 * np.arange(5))
+    assert np.isnan(Trajectory(t_gt, poses).planar_at(t_frames + 1.0, max_gap=0.5)[:4, 0]).all()   # gaps stay NaN

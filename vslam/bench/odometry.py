@@ -32,7 +32,7 @@ from odometry.shared.poses import between, compose
 from odometry.tracking import detect_corners, highpass, normalize, track_lk
 from odometry.vo import Reference, VOConfig, VOStatus, run_visual_odometry
 from vslam.app.odometry import fuse_sequence_odometry, parse_overrides
-from vslam.bench import odometry_regimes
+from vslam.bench import odometry_regimes, odometry_regimes_slam
 from vslam.bench.docs import publish
 from vslam.bench.results import BenchResult, write_json
 from vslam.evaluation.drift import drift_metrics
@@ -343,12 +343,13 @@ def run_regimes_command(args: argparse.Namespace) -> BenchResult:
         where.mkdir(parents=True, exist_ok=True)
         config = VOConfig.from_dict(parse_overrides(args.set), base=VOConfig.preset(args.preset))
         rows = odometry_regimes.run_regimes(where, args.only, config)
-    checks = odometry_regimes.targets(rows)
-    md = odometry_regimes.table(rows) + "\n\ntargets: " + ", ".join(f"{k} {'met' if v else 'NOT met'}"
-                                                                     for k, v in checks.items())
+        slam = odometry_regimes_slam.run_slam(where, args.only)     # the full pipeline in the low-rate regime
+    checks = {**odometry_regimes.targets(rows), **odometry_regimes_slam.targets(slam)}
+    md = odometry_regimes.table(rows) + "\n\n" + odometry_regimes_slam.table(slam) + "\n\ntargets: " + ", ".join(
+        f"{k} {'met' if v else 'NOT met'}" for k, v in checks.items())
     print("\n" + md)
     if args.out:
-        write_json(args.out, {"benchmark": "odometry-regimes", "rows": rows, "targets": checks})
+        write_json(args.out, {"benchmark": "odometry-regimes", "rows": rows, "slam_rows": slam, "targets": checks})
     if not args.only:
         note = publish("odometry-regimes", md, "vslam bench odometry --regimes", getattr(args, "docs", None),
                        getattr(args, "docs_file", None))

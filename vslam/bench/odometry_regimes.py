@@ -87,7 +87,7 @@ def _ours(cfg: SimConfig, name: str):
     return make
 
 
-def _render_floor(textures: tuple[int, ...], seed: int, step: int, name: str, laps: int = 1, shape: str = "loop"):
+def render_floor_sequence(textures: tuple[int, ...], seed: int, step: int, name: str, laps: int = 1, shape: str = "loop"):
     def make(where: Path) -> Path:
         data = shared_dir() / "data"
         full = where / f"rf_{'-'.join(map(str, textures))}_s{seed}_{shape}{laps}"
@@ -123,7 +123,7 @@ def regimes() -> list[Regime]:
                                     "render_floor lawn+grass-dirt s6 1/22": ((2, 3), 6, 22),
                                     "render_floor gravel+concrete s7 1/22": ((0, 1), 7, 22),
                                     "render_floor grass+dry-grass s8 1/38": ((4, 5), 8, 38)}.items():
-        r.append(Regime(name, "render_floor", _render_floor(tex, seed, step, name), low_rate=True))
+        r.append(Regime(name, "render_floor", render_floor_sequence(tex, seed, step, name), low_rate=True))
     for name, cfg in {"ours lanes grass h40 s11": _lanes("grass", 40.0, 0.2, 0.35, 11),
                       "ours lanes asphalt h40 s12": _lanes("asphalt", 40.0, 0.2, 0.35, 12),
                       "ours lanes gravel h100 0.1Hz 60% s13": _lanes("gravel", 100.0, 0.1, 0.6, 13),
@@ -145,7 +145,7 @@ def regimes() -> list[Regime]:
                               "render_floor wood-planks+brick s23 30fps": ((8, 9), 23),
                               "render_floor grass+dry-grass s21 30fps": ((4, 5), 21),
                               "render_floor road+carpet s22 30fps": ((6, 7), 22)}.items():
-        r.append(Regime(name, "render_floor", _render_floor(tex, seed, 1, name), fallback=True))
+        r.append(Regime(name, "render_floor", render_floor_sequence(tex, seed, 1, name), fallback=True))
     return r
 
 

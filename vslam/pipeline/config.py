@@ -22,6 +22,7 @@ from loops.loop_detector import DatabaseParams
 from odometry.fusion import FusionConfig
 from odometry.shared.config import Config, ConfigError, setting
 from odometry.vo import VOConfig
+from vslam.pipeline.motion_gate import MotionGateParams
 
 
 @dataclass(frozen=True)
@@ -62,10 +63,15 @@ class LoopConfig(Config):
     mode: int = setting(4, choices=MODES, doc="descriptor size mode 1..6 (512 B .. 16 kB per keyframe)")
     model: str | None = None         # P(loop|score) model JSON; None = the model shipped with the package
     floor_preset: bool = True        # similarity geometry for a downward camera (CdvsParams.floor)
-    database: DatabaseParams = field(default_factory=DatabaseParams)
-    # keyframes this far back along the path (metres) are not loop candidates; sets database.exclude_recent from
-    # the keyframe spacing (None: use database.exclude_recent as given)
-    exclude_distance: float | None = setting(2.0, range="[0, inf)", unit="m")
+    # recent keyframes are excluded by time and footprint (loops.loop_detector: a keyframe is a candidate once the
+    # camera has left its footprint and it is exclude_seconds old), never by a count: a count of keyframes means
+    # seconds at 30 fps and minutes at 0.14 Hz
+    database: DatabaseParams = field(default_factory=lambda: DatabaseParams(exclude_recent=0, exclude_seconds=2.0,
+                                                                            min_overlap=0.2))
+    exclude_distance: float | None = setting(None, range="[0, inf)", unit="m",
+                                             doc="also exclude keyframes this far back along the path, as a count "
+                                                 "of keyframes at the keyframe spacing (None: time and footprint "
+                                                 "only; a count breaks at aerial scale)")
     pose_threshold_px: float = setting(3.0, range="(0, inf)", unit="px",
                                        doc="RANSAC threshold of the floor-plane fit of a loop's inlier pairs")
     min_pose_inliers: int = setting(12, range="[2, inf)",
@@ -73,6 +79,9 @@ class LoopConfig(Config):
     pose_pixel_sigma: float = setting(1.0, range="(0, inf)", unit="px",
                                       doc="pixel noise of decoded keypoints (coarse coordinate coding)")
     vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
+    # a verified loop must agree with the visual odometry between its two keyframes (drift-aware; the loop's floor
+    # fit above is the one judged, and the one given to the graph)
+    gate: MotionGateParams = field(default_factory=MotionGateParams)
 
     def check(self) -> None:
         if self.recognizer == "horizon":
