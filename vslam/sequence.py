@@ -20,6 +20,9 @@ from vslam.errors import ImageReadError, VslamError
 from vslam.image_file import read_image_file
 
 EXACT_STAMP_S = 1e-6    # s: stamps this close name the same instant (TUM text keeps 6 decimals)
+# s: where no interpolation is allowed (a gap wider than max_gap, e.g. one GNSS fix per photograph at 0.14 Hz), a pose
+# this close to the frame still stands for it; evo's and our ATE association tolerance, so both evaluations agree
+NEAREST_STAMP_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,15 @@ class Trajectory:
             if max_gap is not None:
                 val[(t1 - t0) > max_gap] = np.nan
             out[inside] = val
+        # still empty (a gap, or just outside the ends): the nearest pose within NEAREST_STAMP_S, if any
+        empty = np.isnan(out[:, 0])
+        if np.any(empty):
+            k = np.clip(np.searchsorted(ts, t[empty]), 1, max(len(ts) - 1, 1))
+            k = np.where(np.abs(ts[k - 1] - t[empty]) <= np.abs(ts[np.minimum(k, len(ts) - 1)] - t[empty]),
+                         k - 1, np.minimum(k, len(ts) - 1))
+            ok = np.abs(ts[k] - t[empty]) <= NEAREST_STAMP_S
+            rows = np.nonzero(empty)[0][ok]
+            out[rows] = p[k[ok]]
         return out
 
 

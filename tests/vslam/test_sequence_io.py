@@ -259,3 +259,16 @@ def test_ground_truth_at_low_rate_frames_written_with_six_decimals():
     gt = Trajectory(t_gt, poses).planar_at(t_frames, max_gap=0.5)
     assert np.allclose(gt[:, 0], 14.0 * np.arange(5))
     assert np.isnan(Trajectory(t_gt, poses).planar_at(t_frames + 1.0, max_gap=0.5)[:4, 0]).all()   # gaps stay NaN
+
+
+def test_ground_truth_at_low_rate_frames_written_with_three_decimals():
+    """One fix per photograph written in milliseconds (7.143 s for a frame at 7.142857 s): within the 10 ms ATE
+    association tolerance the frame takes that fix although the gap to the next is wider than max_gap."""
+    t_frames = np.arange(5) / 0.14
+    poses = np.zeros((5, 7))
+    poses[:, 0] = 14.0 * np.arange(5)
+    poses[:, 6] = 1.0
+    gt = Trajectory(np.round(t_frames, 3), poses).planar_at(t_frames, max_gap=0.5)
+    assert np.allclose(gt[:, 0], 14.0 * np.arange(5))
+    late = Trajectory(np.round(t_frames, 3) + 0.02, poses).planar_at(t_frames, max_gap=0.5)   # 20 ms off: no pose
+    assert np.isnan(late[:, 0]).all()
