@@ -29,16 +29,17 @@ from loops.horizon.params import Consensus, HorizonParams, SampleMode
 from loops.horizon.signal import HorizonError, as_gray
 from loops.horizon.surf1d import RESP_COEF, SIGN_WEIGHT, min_signal_length, signal_plan
 
-INVALID = -1.0e4   # key bias of an empty slot: its similarity to any test feature is below every real one
 
 
 @dataclass(frozen=True)
 class PackedBands:
     """1D SURF features of every band of one view, at most K per band (empty slots have valid False).
 
-    x: (B, K) image column of each feature. keys: (B, K, D + 2) float32, the descriptor (unit length), its sign
-    times SIGN_WEIGHT and a bias (0 valid, INVALID empty), so that one product gives descriptor distances, the
-    sign test and the exclusion of empty slots. response: (B, K) scale-normalised response. width: image columns.
+    x: (B, K) image column of each feature. keys: (B, K, D + 1) float32, the descriptor (unit length) and its sign
+    times SIGN_WEIGHT (surf1d's matching keys), all 0 in an empty slot. With unit descriptors and SIGN_WEIGHT 2 a
+    same-sign pair has similarity in [3, 5], an opposite-sign pair in [-5, -3] and an empty slot 0: the nearest
+    stored feature is the largest similarity, and it is a match only when positive.
+    response: (B, K) scale-normalised response. width: image columns.
     """
 
     x: np.ndarray
@@ -55,15 +56,17 @@ class PackedBands:
 
 @dataclass(frozen=True)
 class PackedSet:
-    """P stored views, laid out for matching: keys_t (B, D + 2, P * K) (view p's slots at p * K .. p * K + K - 1),
-    x (B, P, K), enough (B, P): band holds at least two features (nearest and second nearest exist)."""
+    """P stored views side by side: keys (B, D + 1, K, P) for the similarity product, x (B, K, P), enough (B, P):
+    the band holds at least two features (a nearest and a second nearest exist), max_x: the largest stored
+    column."""
 
-    keys_t: np.ndarray
+    keys: np.ndarray
     x: np.ndarray
     enough: np.ndarray
+    max_x: float
 
     def __len__(self) -> int:
-        return int(self.x.shape[1])
+        return int(self.x.shape[2])
 
 
 @dataclass(frozen=True)
@@ -76,11 +79,14 @@ class PackedScores:
 
 @dataclass(frozen=True)
 class _BandPlan:
-    rows: np.ndarray      # (B * band_height,) image rows, band after band
-    ext_idx: np.ndarray   # (L,) signal index of each padded-integral input (index n = a zero column)
-    resp_idx: np.ndarray  # (4, M) integral look-ups of the candidates of levels that fit the signal
-    resp_w: np.ndarray    # (M,)
-    cand: np.ndarray      # (M,) index of each kept candidate in the 1D plan
+    rows: np.ndarray | None     # (B * band_height,) image rows band after band; None when they are one slice
+    r0: int                     # first row of that slice
+    ext_cols: np.ndarray        # (L,) column of the band sums feeding each padded-integral input (W: zero column)
+    resp_flat: np.ndarray       # (B, 4, M) flat look-ups into the (B, L) integral, candidates of the kept levels
+    resp_w: np.ndarray          # (M,)
+    desc_idx: np.ndarray        # (M, S + 2) integral look-ups of each candidate's descriptor samples
+    x: np.ndarray               # (M,) image column of each candidate
+    length: int                 # L
     n: int
 
 
@@ -91,25 +97,55 @@ def _band_plan(height: int, width: int, row: float, params: HorizonParams) -> _B
         raise HorizonError(f"horizon signal too short: {n} samples (image width {width} / step {params.step}); "
                            f"1D SURF needs at least {min_signal_length(params)}")
     band = params.band_height
-    rows = []
+    starts = []
     for r in band_rows(row, height, params):
         r0 = int(np.floor(r + 0.5)) - band // 2
         if r0 < 0 or r0 + band > height:
             raise HorizonError(f"horizon row {row:g}: a {band}-pixel band needs rows {r0}..{r0 + band - 1}, but "
                                f"the image has rows 0..{height - 1}")
-        rows.append(np.arange(r0, r0 + band))
+        starts.append(r0)
+    rows = (np.array(starts)[:, None] + np.arange(band)).ravel()
+    contiguous = bool(np.all(np.diff(rows) == 1))
     plan = signal_plan(n, params)
-    pad = plan.pad
-    ext_idx = np.concatenate([[n], np.zeros(pad, np.intp), np.arange(n), np.full(pad, n - 1)]).astype(np.intp)
     # Levels whose filter never fits the signal give zero responses everywhere: skip them (each kept level keeps
     # all its candidates, so its first and last still separate it from its neighbours in the flat vector).
     used = np.unique(plan.cand_level[plan.resp_weight > 0])
     keep = np.flatnonzero(np.isin(plan.cand_level, used))
-    out = _BandPlan(np.concatenate(rows), ext_idx, np.ascontiguousarray(plan.resp_idx[:, keep]),
-                    plan.resp_weight[keep], keep, n)
-    for a in (out.rows, out.ext_idx, out.resp_idx, out.resp_w, out.cand):
+    resp_idx, desc_idx = plan.resp_idx[:, keep], plan.desc_idx[keep]
+    # The padding the kept levels reach (the 1D plan pads for the largest level). Fewer replicated samples shift
+    # every integral value by the same multiple of the first sample; responses and Haar sums are differences
+    # with coefficients summing to 0, so they do not change.
+    lo, hi = min(resp_idx.min(), desc_idx.min()), max(resp_idx.max(), desc_idx.max())
+    pad = max(plan.pad - int(lo), int(hi) - plan.pad - n, 1)
+    delta = plan.pad - pad
+    length = n + 2 * pad + 1
+    sample_col = np.arange(n) * (1 if params.sample_mode is SampleMode.BOX else params.step)
+    src = n if params.sample_mode is SampleMode.BOX else width
+    ext_cols = np.concatenate([[src], np.full(pad, sample_col[0]), sample_col, np.full(pad, sample_col[-1])])
+    resp_flat = (resp_idx - delta)[None] + (np.arange(params.bands) * length)[:, None, None]
+    out = _BandPlan(None if contiguous else rows, starts[0], ext_cols.astype(np.intp), resp_flat,
+                    plan.resp_weight[keep], desc_idx - delta, plan.columns[plan.cand_pos[keep]], length, n)
+    for a in (rows, out.ext_cols, out.resp_flat, out.resp_w, out.desc_idx, out.x):
         a.setflags(write=False)
     return out
+
+
+def _band_sums(image: np.ndarray, bp: _BandPlan, params: HorizonParams) -> np.ndarray:
+    """(B, W + 1) column sums of each band (column W is 0), or (B, n + 1) box sums in SampleMode.BOX."""
+    n_bands, band = params.bands, params.band_height
+    px = image[bp.r0:bp.r0 + n_bands * band] if bp.rows is None else image[bp.rows]
+    # Integer sums are exact; uint16 holds a band of up to 257 rows of uint8 and is the fastest to accumulate.
+    acc = (np.uint16 if image.dtype == np.uint8 and band * 255 < 2 ** 16 else
+           np.int64 if image.dtype.kind in "ui" else np.float64)
+    if params.sample_mode is SampleMode.BOX:
+        sums = np.zeros((n_bands, bp.n + 1), acc)
+        sums[:, :bp.n] = px[:, :bp.n * params.step].reshape(n_bands, band, bp.n, params.step).sum(axis=(1, 3),
+                                                                                                    dtype=acc)
+        return sums
+    width = image.shape[1]
+    sums = np.zeros((n_bands, width + 1), acc)
+    np.add.reduce(px.reshape(n_bands, band, width), axis=1, dtype=acc, out=sums[:, :width])
+    return sums
 
 
 def extract_packed(image: np.ndarray, row: float, params: HorizonParams) -> PackedBands:
@@ -121,59 +157,53 @@ def extract_packed(image: np.ndarray, row: float, params: HorizonParams) -> Pack
     height, width = image.shape
     bp = _band_plan(height, width, float(row), params)
     plan = signal_plan(bp.n, params)
-    n_bands, band, n = params.bands, params.band_height, bp.n
-    sig = np.zeros((n_bands, n + 1))                          # column n stays 0: the integral's leading zero
-    if params.sample_mode is SampleMode.BOX:
-        px = image[bp.rows, :n * params.step].reshape(n_bands, band, n, params.step)
-        sig[:, :n] = px.sum(axis=(1, 3), dtype=np.float64)
-    else:
-        np.add.reduce(image[bp.rows, ::params.step].reshape(n_bands, band, n), axis=1, dtype=np.float64,
-                      out=sig[:, :n])
-    integral = np.cumsum(sig[:, bp.ext_idx], axis=1)          # (B, L), as surf1d._padded_integral per band
-    r = np.matmul(RESP_COEF, integral[:, bp.resp_idx])       # (B, M)
+    n_bands = params.bands
+    # Padded integral of each band's signal, as surf1d's (edge samples replicated, a leading 0).
+    integral = np.cumsum(_band_sums(image, bp, params)[:, bp.ext_cols], axis=1, dtype=np.float64)
+    r = np.matmul(RESP_COEF, integral.ravel().take(bp.resp_flat))   # (B, M)
     r *= bp.resp_w
     a = np.abs(r)
     c = a[:, 1:-1]
     bi, ci = np.nonzero((c > np.maximum(a[:, :-2], params.threshold)) & (c >= a[:, 2:]))   # band, then position
     # The k_max strongest of each band (ties: the first position, as surf1d), into slots 0.. in that order.
-    order = np.lexsort((-c[bi, ci], bi))
+    val = c[bi, ci]
+    order = np.argsort(bi * (2.0 * val.max(initial=0.0) + 1.0) - val, kind="stable")
     bi, ci = bi[order], ci[order]
     counts = np.bincount(bi, minlength=n_bands)
     slot = np.arange(bi.size) - (np.cumsum(counts) - counts)[bi]
     keep = slot < k_max
-    bi, ci, slot = bi[keep], ci[keep], slot[keep]
-    cand = bp.cand[ci + 1]                                       # kept candidates, in the 1D plan
+    bi, slot, cand = bi[keep], slot[keep], ci[keep] + 1
     # Descriptors as surf1d.detect_and_describe: integral look-ups -> Haar responses and subregion sums.
-    out = integral.ravel()[plan.desc_idx[cand] + (bi * integral.shape[1])[:, None]] @ plan.desc_haar
+    out = integral.ravel()[bp.desc_idx[cand] + (bi * bp.length)[:, None]] @ plan.desc_haar
     n_s = plan.desc_abs.shape[0]
     desc = np.abs(out[:, :n_s]) @ plan.desc_abs
     desc += out[:, n_s:]
     desc /= np.sqrt(np.einsum("kd,kd->k", desc, desc) + 1e-24)[:, None]
-    resp = r[bi, ci + 1]
+    resp = r[bi, cand]
     d = desc.shape[1]
-    keys = np.zeros((n_bands, k_max, d + 2), np.float32)
-    keys[..., d + 1] = INVALID
+    keys = np.zeros((n_bands, k_max, d + 1), np.float32)
     keys[bi, slot, :d] = desc
     keys[bi, slot, d] = np.sign(resp) * SIGN_WEIGHT
-    keys[bi, slot, d + 1] = 0.0
     valid = np.zeros((n_bands, k_max), bool)
     valid[bi, slot] = True
     x = np.zeros((n_bands, k_max))
-    x[bi, slot] = plan.columns[plan.cand_pos[cand]]
+    x[bi, slot] = bp.x[cand]
     response = np.zeros((n_bands, k_max))
     response[bi, slot] = resp
     return PackedBands(x, keys, valid, response, width)
 
 
 def stack_packed(views: list[PackedBands]) -> PackedSet:
-    """Stored views side by side (they must come from the same bands and max_features)."""
+    """Stored views side by side (all from the same bands and max_features)."""
     if not views:
-        raise ValueError("no views to stack")
-    keys = np.stack([v.keys for v in views], axis=1)                 # (B, P, K, D2)
-    b, p, k, d2 = keys.shape
-    keys_t = np.ascontiguousarray(keys.transpose(0, 3, 1, 2)).reshape(b, d2, p * k)
-    valid = np.stack([v.valid for v in views], axis=1)               # (B, P, K)
-    return PackedSet(keys_t, np.stack([v.x for v in views], axis=1), valid.sum(axis=2) >= 2)
+        raise HorizonError("no views to stack")
+    shapes = {v.keys.shape for v in views}
+    if len(shapes) > 1:
+        raise HorizonError(f"views of different bands / max_features cannot be stacked: key shapes {sorted(shapes)}")
+    keys = np.ascontiguousarray(np.stack([v.keys for v in views], axis=3).transpose(0, 2, 1, 3))   # (B, D2, K, P)
+    valid = np.stack([v.valid for v in views], axis=2)                  # (B, K, P)
+    x = np.stack([v.x for v in views], axis=2)
+    return PackedSet(keys, x, valid.sum(axis=1) >= 2, float(x.max()))
 
 
 def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
@@ -184,41 +214,40 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     and sign tests; weights 1 / max(distance, min_distance); NN score = their sum; consensus = the heaviest window
     of two adjacent ransac_tolerance bins of x_test - x_stored holding at least ransac_min_inliers matches.
     """
-    if params.consensus is not Consensus.SHIFT:
-        raise HorizonError("the packed path scores with consensus 'shift' only")
-    keys_t, xs, enough = stored.keys_t, stored.x, stored.enough
-    b, d2, pk = keys_t.shape
-    k = xs.shape[2]
+    if params.consensus is not Consensus.SHIFT or not params.match_sign or params.one_to_one:
+        raise HorizonError("the packed path matches with consensus 'shift', match_sign true, one_to_one false")
+    keys, xs, enough = stored.keys, stored.x, stored.enough
     if which is not None:
         which = np.asarray(which, np.intp)
-        cols = (which[:, None] * k + np.arange(k)).ravel()
-        keys_t, xs, enough = keys_t[:, :, cols], xs[:, which], enough[:, which]
-        pk = cols.size
-    p = pk // k
-    q = test.keys.copy()
-    q[..., -1] = 1.0                                                 # picks up each stored slot's bias
-    sim = np.matmul(q, keys_t).reshape(b, q.shape[1], p, k)          # (B, Kt, P, Ks)
-    j1 = sim.argmax(axis=3)[..., None]
-    s1 = np.take_along_axis(sim, j1, axis=3)[..., 0]
-    np.put_along_axis(sim, j1, -np.inf, axis=3)
-    s2 = sim.max(axis=3)
-    base = 2.0 + 2.0 * SIGN_WEIGHT ** 2 if params.match_sign else 2.0
-    if not params.match_sign:
-        raise HorizonError("the packed path applies the sign test (match_sign true)")
-    if params.one_to_one:
-        raise HorizonError("the packed path has no one-to-one matching")
-    d1 = base - 2.0 * s1
-    ok = (d1 < (params.ratio ** 2) * (base - 2.0 * s2)) & (s1 > 0.0)
+        keys, xs, enough = keys[..., which], xs[..., which], enough[:, which]
+    b, d2, ks, p = keys.shape
+    kt = test.keys.shape[1]
+    sim = np.matmul(test.keys, keys.reshape(b, d2, ks * p))              # (B, Kt, Ks * P)
+    # Nearest and second nearest slot in two max passes over a copy whose low mantissa bits carry the slot index;
+    # their exact similarities are then read from sim. Non-negative floats order as their int32 bit patterns, and
+    # every negative one (opposite sign) is below them: the nearest is right whenever it is a match (> 0), and a
+    # wrong second nearest is then <= 0, where the ratio test passes as it does with the true one (d1 <= 4,
+    # d2 >= 10).
+    bits = max(1, (ks - 1).bit_length())
+    si = np.bitwise_and(sim.view(np.int32), np.int32(-(1 << bits))).reshape(b, kt, ks, p)
+    si |= np.arange(ks, dtype=np.int32)[:, None]
+    j1 = si.max(axis=2) & ((1 << bits) - 1)                              # (B, Kt, P)
+    at = (np.arange(b * kt).reshape(b, kt, 1) * ks + np.stack([j1, j1])) * p + np.arange(p)   # (2, B, Kt, P)
+    flat_si = si.ravel()
+    flat_si[at[0]] = np.iinfo(np.int32).min
+    at[1] += (si.max(axis=2) & ((1 << bits) - 1)) * p - j1 * p
+    s12 = sim.ravel()[at]
+    d12 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * s12                       # squared distances
+    ok = (d12[0] < (params.ratio ** 2) * d12[1]) & (s12[0] > 0.0)
     ok &= test.valid[:, :, None] & enough[:, None, :]
-    w = np.where(ok, 1.0 / np.maximum(np.sqrt(np.maximum(d1, 0.0)), params.min_distance), 0.0)   # (B, Kt, P)
+    w = np.where(ok, 1.0 / np.maximum(np.sqrt(np.maximum(d12[0], 0.0)), params.min_distance), 0.0)   # (B, Kt, P)
     nn = w.sum(axis=(0, 1))
-    # x of each nearest stored slot, then the shift histogram of every (band, view) in one bincount.
-    x_best = np.take_along_axis(xs[:, None, :, :], j1, axis=3)[..., 0]                            # (B, Kt, P)
-    bins = shift_bins(test.x[:, :, None] - x_best, params)
-    lo = int(np.floor(-stored.x.max() / params.ransac_tolerance)) - 1
+    # The shift histogram of every (band, view) in one bincount.
+    shift = test.x[:, :, None] - xs.ravel()[(np.arange(b).reshape(b, 1, 1) * ks + j1) * p + np.arange(p)]
+    lo = int(np.floor(-stored.max_x / params.ransac_tolerance)) - 1
     n_bins = int(np.floor(test.width / params.ransac_tolerance)) - lo + 2
-    bins = np.clip(bins - lo, 0, n_bins - 1)
-    flat = (np.arange(b * p).reshape(b, 1, p) * n_bins + bins).ravel()
+    bins = np.clip(shift_bins(shift, params) - lo, 0, n_bins - 1)
+    flat = ((np.arange(b).reshape(b, 1, 1) * p + np.arange(p)) * n_bins + bins).ravel()
     h = np.bincount(flat, weights=w.ravel(), minlength=b * p * n_bins).reshape(b, p, n_bins)
     c = np.bincount(flat, weights=ok.ravel(), minlength=b * p * n_bins).reshape(b, p, n_bins)
     hw = h[..., :-1] + h[..., 1:]
