@@ -30,7 +30,6 @@ from loops.horizon.signal import HorizonError, as_gray
 from loops.horizon.surf1d import RESP_COEF, SIGN_WEIGHT, min_signal_length, signal_plan
 
 
-
 @dataclass(frozen=True)
 class PackedBands:
     """1D SURF features of every band of one view, at most K per band (empty slots have valid False).
@@ -39,13 +38,12 @@ class PackedBands:
     times SIGN_WEIGHT (surf1d's matching keys), all 0 in an empty slot. With unit descriptors and SIGN_WEIGHT 2 a
     same-sign pair has similarity in [3, 5], an opposite-sign pair in [-5, -3] and an empty slot 0: the nearest
     stored feature is the largest similarity, and it is a match only when positive.
-    response: (B, K) scale-normalised response. width: image columns.
+    width: image columns.
     """
 
     x: np.ndarray
     keys: np.ndarray
     valid: np.ndarray
-    response: np.ndarray
     width: int
 
     @property
@@ -57,13 +55,11 @@ class PackedBands:
 @dataclass(frozen=True)
 class PackedSet:
     """P stored views side by side: keys (B, D + 1, K, P) for the similarity product, x (B, K, P), enough (B, P):
-    the band holds at least two features (a nearest and a second nearest exist), max_x: the largest stored
-    column."""
+    the band holds at least two features (a nearest and a second nearest exist)."""
 
     keys: np.ndarray
     x: np.ndarray
     enough: np.ndarray
-    max_x: float
 
     def __len__(self) -> int:
         return int(self.x.shape[2])
@@ -84,9 +80,10 @@ class _BandPlan:
     ext_cols: np.ndarray        # (L,) column of the band sums feeding each padded-integral input (W: zero column)
     resp_flat: np.ndarray       # (B, 4, M) flat look-ups into the (B, L) integral, candidates of the kept levels
     resp_w: np.ndarray          # (M,)
-    desc_idx: np.ndarray        # (M, S + 2) integral look-ups of each candidate's descriptor samples
+    desc_flat: np.ndarray       # (B, M, S + 2) flat look-ups of each candidate's descriptor samples
+    desc_haar: np.ndarray       # surf1d's descriptor matrices (SignalPlan.desc_haar, .desc_abs)
+    desc_abs: np.ndarray
     x: np.ndarray               # (M,) image column of each candidate
-    length: int                 # L
     n: int
 
 
@@ -122,10 +119,11 @@ def _band_plan(height: int, width: int, row: float, params: HorizonParams) -> _B
     sample_col = np.arange(n) * (1 if params.sample_mode is SampleMode.BOX else params.step)
     src = n if params.sample_mode is SampleMode.BOX else width
     ext_cols = np.concatenate([[src], np.full(pad, sample_col[0]), sample_col, np.full(pad, sample_col[-1])])
-    resp_flat = (resp_idx - delta)[None] + (np.arange(params.bands) * length)[:, None, None]
-    out = _BandPlan(None if contiguous else rows, starts[0], ext_cols.astype(np.intp), resp_flat,
-                    plan.resp_weight[keep], desc_idx - delta, plan.columns[plan.cand_pos[keep]], length, n)
-    for a in (rows, out.ext_cols, out.resp_flat, out.resp_w, out.desc_idx, out.x):
+    band_start = (np.arange(params.bands) * length)[:, None, None]
+    out = _BandPlan(None if contiguous else rows, starts[0], ext_cols.astype(np.intp),
+                    (resp_idx - delta)[None] + band_start, plan.resp_weight[keep], (desc_idx - delta)[None] + band_start,
+                    plan.desc_haar, plan.desc_abs, plan.columns[plan.cand_pos[keep]], n)
+    for a in (rows, out.ext_cols, out.resp_flat, out.resp_w, out.desc_flat, out.x):
         a.setflags(write=False)
     return out
 
@@ -156,7 +154,6 @@ def extract_packed(image: np.ndarray, row: float, params: HorizonParams) -> Pack
     image = as_gray(np.asarray(image))
     height, width = image.shape
     bp = _band_plan(height, width, float(row), params)
-    plan = signal_plan(bp.n, params)
     n_bands = params.bands
     # Padded integral of each band's signal, as surf1d's (edge samples replicated, a leading 0).
     integral = np.cumsum(_band_sums(image, bp, params)[:, bp.ext_cols], axis=1, dtype=np.float64)
@@ -174,23 +171,20 @@ def extract_packed(image: np.ndarray, row: float, params: HorizonParams) -> Pack
     keep = slot < k_max
     bi, slot, cand = bi[keep], slot[keep], ci[keep] + 1
     # Descriptors as surf1d.detect_and_describe: integral look-ups -> Haar responses and subregion sums.
-    out = integral.ravel()[bp.desc_idx[cand] + (bi * bp.length)[:, None]] @ plan.desc_haar
-    n_s = plan.desc_abs.shape[0]
-    desc = np.abs(out[:, :n_s]) @ plan.desc_abs
+    out = integral.ravel()[bp.desc_flat[bi, cand]] @ bp.desc_haar
+    n_s = bp.desc_abs.shape[0]
+    desc = np.abs(out[:, :n_s]) @ bp.desc_abs
     desc += out[:, n_s:]
     desc /= np.sqrt(np.einsum("kd,kd->k", desc, desc) + 1e-24)[:, None]
-    resp = r[bi, cand]
     d = desc.shape[1]
     keys = np.zeros((n_bands, k_max, d + 1), np.float32)
     keys[bi, slot, :d] = desc
-    keys[bi, slot, d] = np.sign(resp) * SIGN_WEIGHT
+    keys[bi, slot, d] = np.where(r[bi, cand] > 0, SIGN_WEIGHT, -SIGN_WEIGHT)   # never 0: |r| > threshold >= 0
     valid = np.zeros((n_bands, k_max), bool)
     valid[bi, slot] = True
     x = np.zeros((n_bands, k_max))
     x[bi, slot] = bp.x[cand]
-    response = np.zeros((n_bands, k_max))
-    response[bi, slot] = resp
-    return PackedBands(x, keys, valid, response, width)
+    return PackedBands(x, keys, valid, width)
 
 
 def stack_packed(views: list[PackedBands]) -> PackedSet:
@@ -203,7 +197,7 @@ def stack_packed(views: list[PackedBands]) -> PackedSet:
     keys = np.ascontiguousarray(np.stack([v.keys for v in views], axis=3).transpose(0, 2, 1, 3))   # (B, D2, K, P)
     valid = np.stack([v.valid for v in views], axis=2)                  # (B, K, P)
     x = np.stack([v.x for v in views], axis=2)
-    return PackedSet(keys, x, valid.sum(axis=1) >= 2, float(x.max()))
+    return PackedSet(keys, x, valid.sum(axis=1) >= 2)
 
 
 def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
@@ -244,9 +238,14 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     nn = w.sum(axis=(0, 1))
     # The shift histogram of every (band, view) in one bincount.
     shift = test.x[:, :, None] - xs.ravel()[(np.arange(b).reshape(b, 1, 1) * ks + j1) * p + np.arange(p)]
-    lo = int(np.floor(-stored.max_x / params.ransac_tolerance)) - 1
-    n_bins = int(np.floor(test.width / params.ransac_tolerance)) - lo + 2
-    bins = np.clip(shift_bins(shift, params) - lo, 0, n_bins - 1)
+    bins = shift_bins(shift, params)
+    if not ok.any():
+        return PackedScores(nn, np.zeros(p))
+    matched = bins[ok]
+    lo = int(matched.min())
+    n_bins = int(matched.max()) - lo + 2
+    bins -= lo
+    np.clip(bins, 0, n_bins - 1, out=bins)           # unmatched slots: anywhere, with weight and count 0
     flat = ((np.arange(b).reshape(b, 1, 1) * p + np.arange(p)) * n_bins + bins).ravel()
     h = np.bincount(flat, weights=w.ravel(), minlength=b * p * n_bins).reshape(b, p, n_bins)
     c = np.bincount(flat, weights=ok.ravel(), minlength=b * p * n_bins).reshape(b, p, n_bins)
