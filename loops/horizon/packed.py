@@ -223,32 +223,54 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     # wrong second nearest is then <= 0, where the ratio test passes as it does with the true one (d1 <= 4,
     # d2 >= 10).
     bits = max(1, (ks - 1).bit_length())
-    si = np.bitwise_and(sim.view(np.int32), np.int32(-(1 << bits))).reshape(b, kt, ks, p)
+    low = (1 << bits) - 1
+    row, x_row, h_row = _match_index(b, kt, ks, p)
+    si = np.bitwise_and(sim.view(np.int32), np.int32(~low)).reshape(b, kt, ks, p)
     si |= np.arange(ks, dtype=np.int32)[:, None]
-    j1 = si.max(axis=2) & ((1 << bits) - 1)                              # (B, Kt, P)
-    at = (np.arange(b * kt).reshape(b, kt, 1) * ks + np.stack([j1, j1])) * p + np.arange(p)   # (2, B, Kt, P)
+    j1 = si.max(axis=2)
+    j1 &= low                                                            # (B, Kt, P)
+    at1 = row + j1 * p
     flat_si = si.ravel()
-    flat_si[at[0]] = np.iinfo(np.int32).min
-    at[1] += (si.max(axis=2) & ((1 << bits) - 1)) * p - j1 * p
-    s12 = sim.ravel()[at]
-    d12 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * s12                       # squared distances
-    ok = (d12[0] < (params.ratio ** 2) * d12[1]) & (s12[0] > 0.0)
+    flat_si[at1] = np.iinfo(np.int32).min
+    j2 = si.max(axis=2)
+    j2 &= low
+    flat_sim = sim.ravel()
+    s1 = flat_sim[at1]
+    d1 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * s1                         # squared descriptor distances
+    d2 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * flat_sim[row + j2 * p]
+    ok = d1 < (params.ratio ** 2) * d2
+    ok &= s1 > 0.0
     ok &= test.valid[:, :, None] & enough[:, None, :]
-    w = np.where(ok, 1.0 / np.maximum(np.sqrt(np.maximum(d12[0], 0.0)), params.min_distance), 0.0)   # (B, Kt, P)
+    w = ok / np.sqrt(np.maximum(d1, params.min_distance ** 2))          # 1 / max(distance, min_distance), or 0
     nn = w.sum(axis=(0, 1))
-    # The shift histogram of every (band, view) in one bincount.
-    shift = test.x[:, :, None] - xs.ravel()[(np.arange(b).reshape(b, 1, 1) * ks + j1) * p + np.arange(p)]
-    bins = shift_bins(shift, params)
     if not ok.any():
         return PackedScores(nn, np.zeros(p))
+    # The shift histogram of every (band, view) in one bincount; each match adds its weight plus `unit`, so a
+    # window's count and weight come out of the same sum (weights of one band sum to less than unit).
+    bins = shift_bins(test.x[:, :, None] - xs.ravel()[x_row + j1 * p], params)
     matched = bins[ok]
     lo = int(matched.min())
     n_bins = int(matched.max()) - lo + 2
     bins -= lo
-    np.clip(bins, 0, n_bins - 1, out=bins)           # unmatched slots: anywhere, with weight and count 0
-    flat = ((np.arange(b).reshape(b, 1, 1) * p + np.arange(p)) * n_bins + bins).ravel()
-    h = np.bincount(flat, weights=w.ravel(), minlength=b * p * n_bins).reshape(b, p, n_bins)
-    c = np.bincount(flat, weights=ok.ravel(), minlength=b * p * n_bins).reshape(b, p, n_bins)
+    np.clip(bins, 0, n_bins - 1, out=bins)                               # unmatched: any bin, they add 0
+    unit = 2.0 ** np.ceil(np.log2(kt / params.min_distance + 1.0))
+    w_count = w + unit * ok
+    h = np.bincount((h_row * n_bins + bins).ravel(), weights=w_count.ravel(), minlength=b * p * n_bins)
+    h = h.reshape(b, p, n_bins)
     hw = h[..., :-1] + h[..., 1:]
-    hw[(c[..., :-1] + c[..., 1:]) < params.ransac_min_inliers] = 0.0
+    count = np.floor(hw / unit)
+    hw -= unit * count
+    hw[count < params.ransac_min_inliers] = 0.0
     return PackedScores(nn, hw.max(axis=2).sum(axis=0))
+
+
+@functools.lru_cache(maxsize=64)
+def _match_index(b: int, kt: int, ks: int, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat indices of slot 0 of each (band, test slot, view) in the (B, Kt, Ks, P) similarities, of each (band,
+    view) in the (B, Ks, P) stored columns and in the (B, P, bins) histogram (times its bin count)."""
+    row = np.arange(b * kt).reshape(b, kt, 1) * (ks * p) + np.arange(p)
+    x_row = np.arange(b).reshape(b, 1, 1) * (ks * p) + np.arange(p)
+    h_row = np.arange(b).reshape(b, 1, 1) * p + np.arange(p)
+    for a in (row, x_row, h_row):
+        a.setflags(write=False)
+    return row, x_row, h_row
