@@ -2,9 +2,9 @@
 the same frames in the same run.
 
 How the time is compared (both methods, same images, same pairs, same process, one thread each: OpenCV
-single-threaded, BLAS single-threaded by the CLI; thread CPU time, so that other processes on a shared machine
-do not count; the two methods' calls interleaved image by image and query by query, so that a change of load
-hits both):
+single-threaded, BLAS single-threaded by the CLI; thread CPU time, so that time spent waiting for other
+processes on a shared machine does not count; the two methods take turns every 16 images / 16 test views, so that
+a change of load hits both, while each runs its own loop as it would in use):
 
 - per image: one extraction call (a frame as it arrives), median over the images.
 - per pair, matching: median over the pairs. ORB matches one pair per call (its cost does not depend on the
@@ -33,6 +33,7 @@ from vslam.bench.horizon_real import OrbRansac
 from vslam.evaluation.tables import format_table
 
 ORB = "ORB(1000) + RANSAC, native size"
+BLOCK = 16   # images or test views per block: the methods take turns block by block
 
 
 @dataclass
@@ -60,6 +61,10 @@ def fast_name(params: HorizonParams) -> str:
             f"shift consensus)")
 
 
+def _blocks(items: list, size: int = BLOCK) -> list[list]:
+    return [items[i:i + size] for i in range(0, len(items), size)]
+
+
 def _measure(ps: PairSet, params: HorizonParams) -> _Measured:
     cv2.setNumThreads(1)
     clock = time.thread_time_ns
@@ -67,12 +72,13 @@ def _measure(ps: PairSet, params: HorizonParams) -> _Measured:
     fast = fast_name(params)
     feats: dict[str, dict] = {ORB: {}, fast: {}}
     ext: dict[str, dict[str, float]] = {ORB: {}, fast: {}}
-    for i, (name, im) in enumerate(ps.images.items()):
-        order = ((ORB, lambda: orb.extract(im)), (fast, lambda: extract_packed(im, ps.rows[name], params)))
-        for method, fn in (order if i % 2 else order[::-1]):
-            t0 = clock()
-            feats[method][name] = fn()
-            ext[method][name] = (clock() - t0) / 1e3
+    extractors = {ORB: lambda im, row: orb.extract(im), fast: lambda im, row: extract_packed(im, row, params)}
+    for i, block in enumerate(_blocks(list(ps.images))):
+        for method in ((ORB, fast) if i % 2 else (fast, ORB)):
+            for name in block:
+                t0 = clock()
+                feats[method][name] = extractors[method](ps.images[name], ps.rows[name])
+                ext[method][name] = (clock() - t0) / 1e3
     stored_names = sorted({a for a, _ in ps.pairs})
     col = {n: i for i, n in enumerate(stored_names)}
     db = stack_packed([feats[fast][n] for n in stored_names])
@@ -83,21 +89,30 @@ def _measure(ps: PairSet, params: HorizonParams) -> _Measured:
     scores = {ORB: np.zeros(n), fast: np.zeros(n)}
     match_us = {ORB: np.zeros(n), fast: np.zeros(n)}
     all_us: dict[str, float] = {}
-    for b, idx in groups.items():
-        which = np.array([col[ps.pairs[p][0]] for p in idx])
-        t0 = clock()
-        r = match_packed(feats[fast][b], db, params, which)
-        t = (clock() - t0) / 1e3
-        scores[fast][idx] = r.score_ransac
-        match_us[fast][idx] = t / len(idx)
-        t0 = clock()
-        match_packed(feats[fast][b], db, params)
-        all_us[b] = (clock() - t0) / 1e3 / len(stored_names)
-        for p in idx:
-            a = ps.pairs[p][0]
+
+    def packed(block: list[str]) -> None:
+        for b in block:
+            idx = groups[b]
+            which = np.array([col[ps.pairs[p][0]] for p in idx])
             t0 = clock()
-            scores[ORB][p] = orb.match(feats[ORB][b], feats[ORB][a])
-            match_us[ORB][p] = (clock() - t0) / 1e3
+            r = match_packed(feats[fast][b], db, params, which)
+            t = (clock() - t0) / 1e3
+            scores[fast][idx] = r.score_ransac
+            match_us[fast][idx] = t / len(idx)
+            t0 = clock()
+            match_packed(feats[fast][b], db, params)
+            all_us[b] = (clock() - t0) / 1e3 / len(stored_names)
+
+    def orb_pairs(block: list[str]) -> None:
+        for b in block:
+            for p in groups[b]:
+                t0 = clock()
+                scores[ORB][p] = orb.match(feats[ORB][b], feats[ORB][ps.pairs[p][0]])
+                match_us[ORB][p] = (clock() - t0) / 1e3
+
+    for i, block in enumerate(_blocks(list(groups))):
+        for run in ((orb_pairs, packed) if i % 2 else (packed, orb_pairs)):
+            run(block)
     return _Measured(scores, ext, match_us, all_us)
 
 
@@ -119,19 +134,20 @@ def compare(ps: PairSet, params: HorizonParams, halves: dict[str, int | None]) -
     m = _measure(ps, params)
     fast = fast_name(params)
     res: dict[str, dict] = {}
-    rows = []
+    rows, ratio_rows = [], []
+    cols = ("extraction_us", "matching_us", "matching_every_us", "strict_us", "every_pair_us")
     for half_name, h in halves.items():
         sel = np.ones(len(ps.pairs), bool) if h is None else ps.half == h
         res[half_name] = {meth: _half_figures(ps, m, meth, sel) for meth in (fast, ORB)}
-        o = res[half_name][ORB]
+        o, f = res[half_name][ORB], res[half_name][fast]
         for meth in (fast, ORB):
-            f = res[half_name][meth]
-            rows.append([half_name, meth, f["auc"], f["extraction_us"], f["matching_us"], f["matching_every_us"],
-                         f["strict_us"], f["every_pair_us"], o["matching_every_us"] / f["matching_every_us"],
-                         o["strict_us"] / f["strict_us"], o["every_pair_us"] / f["every_pair_us"]])
-    table = format_table(
-        ["half", "method", "AUC", "extraction us / image", "matching us / pair (its candidates)",
-         "matching us / pair (against every stored view)", "us / pair, strict (2 extractions + match)",
-         "us / pair, every test x every stored view", "ORB / this, matching", "ORB / this, strict",
-         "ORB / this, every x every"], rows, floatfmt=".3g")
-    return table, res
+            r = res[half_name][meth]
+            rows.append([half_name, meth, r["pairs"], r["auc"], *(r[c] for c in cols)])
+        ratio_rows.append([half_name, f["auc"] - o["auc"], *(o[c] / f[c] for c in cols)])
+        res[half_name]["orb_over_packed"] = {c: o[c] / f[c] for c in cols}
+    names = ["extraction / image", "matching / pair (its candidates)", "matching / pair (against every stored view)",
+             "per pair, strict (2 extractions + matching)", "per pair, every test x every stored view"]
+    table = format_table(["half", "method", "pairs", "AUC", *(f"{n}, us" for n in names)], rows, floatfmt=".3g")
+    ratios = format_table(["half", "AUC, packed - ORB", *(f"ORB / packed, {n}" for n in names)], ratio_rows,
+                          floatfmt=".3g")
+    return f"{table}\n\n{ratios}", res
