@@ -43,11 +43,11 @@ class HorizonParams(Config):
         # Small real frames (e.g. 160x120): every column sampled, seven 12-row bands matched band by band
         # (loops.horizon.bands). Chosen on the tuning half of the real pairs of `vslam bench horizon --real`.
         "bands": {"step": 1, "band_height": 12, "bands": 7},
-        # The batched path (loops.horizon.packed): seven 12-row bands sampled every 2 columns, the 16 strongest
-        # features per band, shift consensus in a 16-px window of at least 2 matches. Chosen on the tuning half of
+        # The batched path (loops.horizon.packed): seven 12-row bands sampled every 2 columns, 2 box filters per
+        # octave (lobes 3, 5, 9, 17: fewer candidates), the 16 strongest features per band, shift consensus in a 16-px window of at least 2 matches. Chosen on the tuning half of
         # `vslam bench horizon --real-only` as the cheapest setting whose AUC stays well above full-image ORB's
         # there; the pixel values suit frames of about 120-400 rows, like `bands`.
-        "fast": {"step": 2, "band_height": 12, "bands": 7, "max_features": 16, "consensus": "shift",
+        "fast": {"step": 2, "band_height": 12, "bands": 7, "intervals": 2, "max_features": 16, "consensus": "shift",
                  "ransac_tolerance": 16.0, "ransac_min_inliers": 2},
     }
 
