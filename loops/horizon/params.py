@@ -67,7 +67,7 @@ class HorizonParams(Config):
                              doc="box filters per octave; lobe = 2^(o+1) * (i+1) + 1 samples, as in SURF")
     threshold: float = setting(1.0, range="[0, inf)",
                                doc="on |scale-normalised second derivative|, grey levels per band pixel")
-    max_features: int = setting(0, range="[0, inf)",
+    max_features: int = setting(0, range="[0, inf)", unit="features per band",
                                 doc="keep the strongest (largest |response|) features of each band; 0 keeps all. "
                                     "Bounds the matching cost, which grows with the square of the count")
 
@@ -93,7 +93,10 @@ class HorizonParams(Config):
                                       doc="fewer consistent matches give score_ransac = 0 (two points fit any line)")
     max_scale_change: float = setting(2.0, range="[1, inf)",
                                       doc="b_s must lie in [1/max, max]; b_s <= 0 would reverse the horizon order")
-    consensus: Consensus = Consensus.RANSAC
+    consensus: Consensus = setting(Consensus.RANSAC,
+                                   doc="geometric check of score_ransac: 'ransac' (the paper's line) or 'shift' (the "
+                                       "heaviest 2 x ransac_tolerance window of x_test - x_stored; needed by "
+                                       "loops.horizon.packed)")
     scale_tolerance: float = setting(0.0, range="[0, inf)")   # > 0: inliers' feature-scale ratio must agree with
     #                                                           b_s within this many octaves (not in the paper; 0
     #                                                           disables)
