@@ -216,6 +216,11 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
         keys, xs, enough = keys[..., which], xs[..., which], enough[:, which]
     b, d2, ks, p = keys.shape
     kt = test.keys.shape[1]
+    if test.keys.shape != (b, ks, d2):
+        raise HorizonError(f"test view of key shape {test.keys.shape} against stored views of {(b, ks, d2)}: "
+                           "they come from different bands / max_features")
+    if p == 0:
+        return PackedScores(np.zeros(0), np.zeros(0))
     sim = np.matmul(test.keys, keys.reshape(b, d2, ks * p))              # (B, Kt, Ks * P)
     # Nearest and second nearest slot in two max passes over a copy whose low mantissa bits carry the slot index;
     # their exact similarities are then read from sim. Non-negative floats order as their int32 bit patterns, and

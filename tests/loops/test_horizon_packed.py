@@ -149,3 +149,6 @@ def test_bad_input_raises_horizon_errors():
     db = stack_packed([extract_packed(img, 60.0, FAST)])
     with pytest.raises(HorizonError, match="shift"):
         match_packed(extract_packed(img, 60.0, FAST), db, FAST.replace(consensus="ransac"))
+    with pytest.raises(HorizonError, match="different bands"):
+        match_packed(extract_packed(img, 60.0, FAST.replace(max_features=8)), db, FAST)
+    assert match_packed(extract_packed(img, 60.0, FAST), db, FAST, which=np.zeros(0, int)).score.shape == (0,)
