@@ -8,8 +8,6 @@ of a query by the same calls, so the cost per band and per pair is the arithmeti
 - `extract_packed(image, row, params)` -> `PackedBands`: the `params.bands` bands around `row`, at most
   `params.max_features` features each (the strongest), as (bands, K) arrays padded with invalid slots. Per image:
   done once when a view is stored or queried.
-- `extract_packed_many(images, row, params)`: the same for many images of one size in one pass (a database
-  built at once), at a fraction of the per-image cost.
 - `stack_packed([...])` -> `PackedSet`: stored views side by side, laid out for one matrix product per band. Per
   stored view: done once when the database is built.
 - `match_packed(test, stored_set, params, which=None)` -> scores of the test view against each stored view (or
@@ -21,7 +19,6 @@ tests check it on real frames); the RANSAC line has no batched form here. Requir
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,11 +78,9 @@ class _BandPlan:
     rows: np.ndarray | None     # (B * band_height,) image rows band after band; None when they are one slice
     r0: int                     # first row of that slice
     ext_cols: np.ndarray        # (L,) column of the band sums feeding each padded-integral input (W: zero column)
-    resp_idx: np.ndarray        # (4, M) look-ups into a band's padded integral, candidates of the kept levels
-    resp_flat: np.ndarray       # (B, 4, M) the same into the (B, L) integrals of one image, flattened
+    resp_flat: np.ndarray       # (B, 4, M) flat look-ups into the (B, L) integral, candidates of the kept levels
     resp_w: np.ndarray          # (M,)
-    desc_idx: np.ndarray        # (M, S + 2) look-ups of each candidate's descriptor samples
-    length: int                 # L
+    desc_flat: np.ndarray       # (B, M, S + 2) flat look-ups of each candidate's descriptor samples
     desc_haar: np.ndarray       # surf1d's descriptor matrices (SignalPlan.desc_haar, .desc_abs)
     desc_abs: np.ndarray
     x: np.ndarray               # (M,) image column of each candidate
@@ -124,66 +119,45 @@ def _band_plan(height: int, width: int, row: float, params: HorizonParams) -> _B
     sample_col = np.arange(n) * (1 if params.sample_mode is SampleMode.BOX else params.step)
     src = n if params.sample_mode is SampleMode.BOX else width
     ext_cols = np.concatenate([[src], np.full(pad, sample_col[0]), sample_col, np.full(pad, sample_col[-1])])
-    resp_idx = np.ascontiguousarray(resp_idx - delta)
-    out = _BandPlan(None if contiguous else rows, starts[0], ext_cols.astype(np.intp), resp_idx,
-                    resp_idx[None] + (np.arange(params.bands) * length)[:, None, None], plan.resp_weight[keep],
-                    desc_idx - delta, length, plan.desc_haar, plan.desc_abs, plan.columns[plan.cand_pos[keep]], n)
-    for a in (rows, out.ext_cols, out.resp_idx, out.resp_flat, out.resp_w, out.desc_idx, out.x):
+    band_start = (np.arange(params.bands) * length)[:, None, None]
+    out = _BandPlan(None if contiguous else rows, starts[0], ext_cols.astype(np.intp),
+                    (resp_idx - delta)[None] + band_start, plan.resp_weight[keep], (desc_idx - delta)[None] + band_start,
+                    plan.desc_haar, plan.desc_abs, plan.columns[plan.cand_pos[keep]], n)
+    for a in (rows, out.ext_cols, out.resp_flat, out.resp_w, out.desc_flat, out.x):
         a.setflags(write=False)
     return out
 
 
-def _band_sums(images: np.ndarray, bp: _BandPlan, params: HorizonParams) -> np.ndarray:
-    """(N * B, W + 1) column sums of each band of each of the (N, H, W) images (column W is 0), or
-    (N * B, n + 1) box sums in SampleMode.BOX."""
-    rows, band = images.shape[0] * params.bands, params.band_height
-    px = images[:, bp.r0:bp.r0 + params.bands * band] if bp.rows is None else images[:, bp.rows]
+def _band_sums(image: np.ndarray, bp: _BandPlan, params: HorizonParams) -> np.ndarray:
+    """(B, W + 1) column sums of each band (column W is 0), or (B, n + 1) box sums in SampleMode.BOX."""
+    n_bands, band = params.bands, params.band_height
+    px = image[bp.r0:bp.r0 + n_bands * band] if bp.rows is None else image[bp.rows]
     # Integer sums are exact; uint16 holds a band of up to 257 rows of uint8 and is the fastest to accumulate.
-    acc = (np.uint16 if images.dtype == np.uint8 and band * 255 < 2 ** 16 else
-           np.int64 if images.dtype.kind in "ui" else np.float64)
+    acc = (np.uint16 if image.dtype == np.uint8 and band * 255 < 2 ** 16 else
+           np.int64 if image.dtype.kind in "ui" else np.float64)
     if params.sample_mode is SampleMode.BOX:
-        sums = np.zeros((rows, bp.n + 1), acc)
-        sums[:, :bp.n] = px[..., :bp.n * params.step].reshape(rows, band, bp.n, params.step).sum(axis=(1, 3),
-                                                                                                   dtype=acc)
+        sums = np.zeros((n_bands, bp.n + 1), acc)
+        sums[:, :bp.n] = px[:, :bp.n * params.step].reshape(n_bands, band, bp.n, params.step).sum(axis=(1, 3),
+                                                                                                    dtype=acc)
         return sums
-    width = images.shape[2]
-    sums = np.zeros((rows, width + 1), acc)
-    np.add.reduce(px.reshape(rows, band, width), axis=1, dtype=acc, out=sums[:, :width])
+    width = image.shape[1]
+    sums = np.zeros((n_bands, width + 1), acc)
+    np.add.reduce(px.reshape(n_bands, band, width), axis=1, dtype=acc, out=sums[:, :width])
     return sums
-
-
-MANY_CHUNK = 256   # images per pass of extract_packed_many: bounds its memory (about 30 kB per 160-px image)
 
 
 def extract_packed(image: np.ndarray, row: float, params: HorizonParams) -> PackedBands:
     """Features of the `params.bands` bands around horizon `row`, the `params.max_features` strongest per band."""
-    return _extract(as_gray(np.asarray(image))[None], float(row), params)[0]
-
-
-def extract_packed_many(images: Sequence[np.ndarray], row: float, params: HorizonParams) -> list[PackedBands]:
-    """extract_packed of images of one size and horizon row, all in one pass (e.g. a database of stored views
-    built at once): the same features, at a fraction of the per-image cost of one call per image."""
-    grays = [as_gray(np.asarray(im)) for im in images]
-    shapes = sorted({g.shape for g in grays})
-    if len(shapes) > 1:
-        raise HorizonError(f"extract_packed_many needs images of one size, got {shapes}")
-    out: list[PackedBands] = []
-    for i in range(0, len(grays), MANY_CHUNK):
-        out += _extract(np.stack(grays[i:i + MANY_CHUNK]), float(row), params)
-    return out
-
-
-def _extract(images: np.ndarray, row: float, params: HorizonParams) -> list[PackedBands]:
     k_max = params.max_features
     if k_max <= 0:
         raise HorizonError("the packed path needs max_features > 0 (a fixed number of slots per band)")
-    n_img, height, width = images.shape
-    bp = _band_plan(height, width, row, params)
-    n_bands = n_img * params.bands                             # every band of every image is one row from here
+    image = as_gray(np.asarray(image))
+    height, width = image.shape
+    bp = _band_plan(height, width, float(row), params)
+    n_bands = params.bands
     # Padded integral of each band's signal, as surf1d's (edge samples replicated, a leading 0).
-    integral = np.cumsum(_band_sums(images, bp, params)[:, bp.ext_cols], axis=1, dtype=np.float64)
-    gathered = integral.ravel().take(bp.resp_flat) if n_img == 1 else integral[:, bp.resp_idx]
-    r = np.matmul(RESP_COEF, gathered)                         # (rows, M)
+    integral = np.cumsum(_band_sums(image, bp, params)[:, bp.ext_cols], axis=1, dtype=np.float64)
+    r = np.matmul(RESP_COEF, integral.ravel().take(bp.resp_flat))   # (B, M)
     r *= bp.resp_w
     a = np.abs(r)
     c = a[:, 1:-1]
@@ -197,7 +171,7 @@ def _extract(images: np.ndarray, row: float, params: HorizonParams) -> list[Pack
     keep = slot < k_max
     bi, slot, cand = bi[keep], slot[keep], ci[keep] + 1
     # Descriptors as surf1d.detect_and_describe: integral look-ups -> Haar responses and subregion sums.
-    out = integral.ravel()[bp.desc_idx[cand] + (bi * bp.length)[:, None]] @ bp.desc_haar
+    out = integral.ravel()[bp.desc_flat[bi, cand]] @ bp.desc_haar
     n_s = bp.desc_abs.shape[0]
     desc = np.abs(out[:, :n_s]) @ bp.desc_abs
     desc += out[:, n_s:]
@@ -210,9 +184,7 @@ def _extract(images: np.ndarray, row: float, params: HorizonParams) -> list[Pack
     valid[bi, slot] = True
     x = np.zeros((n_bands, k_max))
     x[bi, slot] = bp.x[cand]
-    b = params.bands
-    return [PackedBands(x[i * b:(i + 1) * b], keys[i * b:(i + 1) * b], valid[i * b:(i + 1) * b], width)
-            for i in range(n_img)]
+    return PackedBands(x, keys, valid, width)
 
 
 def stack_packed(views: list[PackedBands]) -> PackedSet:

@@ -8,7 +8,7 @@ import pytest
 
 from loops.horizon import HorizonError, HorizonParams, extract_bands, match, match_bands
 from loops.horizon.matching import shift_consensus
-from loops.horizon.packed import extract_packed, extract_packed_many, match_packed, stack_packed
+from loops.horizon.packed import extract_packed, match_packed, stack_packed
 from loops.horizon.surf1d import HorizonFeatures
 from tests.loops.test_horizon_bands import scene
 
@@ -57,21 +57,6 @@ def test_packed_extraction_gives_the_reference_features(row):
 def test_overlapping_bands_of_a_low_image_give_the_reference_features():
     img = scene(2)[:40]                            # seven 12-row bands overlap inside 40 rows
     same_features(extract_packed(img, 20.0, FAST), extract_bands(img, 20.0, FAST))
-
-
-def test_many_images_in_one_pass_give_each_image_its_features():
-    imgs = [scene(s) for s in range(5)] + [np.full((120, 160), 77, np.uint8)]
-    for p in (FAST, FAST.replace(sample_mode="box", step=3)):
-        many = extract_packed_many(imgs, 60.0, p)
-        assert len(many) == len(imgs)
-        for m, img in zip(many, imgs):
-            one = extract_packed(img, 60.0, p)
-            np.testing.assert_array_equal(m.x, one.x)
-            np.testing.assert_array_equal(m.valid, one.valid)
-            np.testing.assert_allclose(m.keys, one.keys, atol=1e-6)
-    assert extract_packed_many([], 60.0, FAST) == []
-    with pytest.raises(HorizonError, match="one size"):
-        extract_packed_many([imgs[0], imgs[0][:100]], 50.0, FAST)
 
 
 def test_packed_box_sampling_and_colour_input_give_the_reference_features():
