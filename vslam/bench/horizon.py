@@ -312,7 +312,8 @@ def _real(args: argparse.Namespace, data_dir: Path) -> tuple[str, dict]:
                                    HorizonParams.preset(args.fast_preset),
                                    {"tuning": 0, "reporting": 1})
     head = (f"Packed 1D SURF (preset {args.fast_preset}) against ORB + RANSAC on the same real pairs, thread CPU "
-            f"time, calls interleaved (definitions in vslam/bench/horizon_fast.py and docs/benchmarks.md).")
+            f"time, the methods taking turns every 16 images / test views (definitions in "
+            f"vslam/bench/horizon_fast.py and docs/benchmarks.md).")
     print(f"{head}\n\n{fast_table}", flush=True)
     res["packed_vs_orb"] = fast_res
     return f"{text}\n\n{head}\n\n{fast_table}", res
