@@ -26,7 +26,7 @@ import numpy as np
 from loops.horizon.bands import band_rows
 from loops.horizon.matching import shift_bins
 from loops.horizon.params import Consensus, HorizonParams, SampleMode
-from loops.horizon.signal import HorizonError, as_gray
+from loops.horizon.signal import HorizonError, HorizonLine, as_gray
 from loops.horizon.surf1d import RESP_COEF, SIGN_WEIGHT, min_signal_length, signal_plan
 
 
@@ -71,6 +71,48 @@ class PackedScores:
 
     score: np.ndarray
     score_ransac: np.ndarray
+    matches: list["PackedMatch"] | None = None    # with details=True: each view's consensus matches
+
+
+@dataclass(frozen=True)
+class PackedMatch:
+    """One (test, stored) pair of the packed path: the scores, the shift line (b_s = 1, b_d = the mean shift of
+    the consensus matches; NaN when no band has a consensus) and the consensus matches as image columns."""
+
+    score: float
+    score_ransac: float
+    b_s: float
+    b_d: float
+    x_test: np.ndarray      # (M,) column of each consensus match in the test view
+    x_stored: np.ndarray    # (M,) and in the stored view
+    band: np.ndarray        # (M,) its band
+
+    @property
+    def n_inliers(self) -> int:
+        return int(self.x_test.shape[0])
+
+
+def uses_packed(params: HorizonParams) -> bool:
+    """Whether the landmark memory, the recogniser and `vslam horizon` score through this module with `params`
+    (preset `fast` does): a fixed number of slots per band, shift consensus, the sign test, no one-to-one."""
+    return (params.max_features > 0 and params.consensus is Consensus.SHIFT and params.match_sign
+            and not params.one_to_one)
+
+
+def level_row(horizon: float | HorizonLine) -> float:
+    """The row of a level horizon; the packed path reads bands of whole rows, so a tilted line is refused."""
+    if isinstance(horizon, HorizonLine):
+        if horizon.row_left != horizon.row_right:
+            raise HorizonError(f"horizon line {horizon.row_left:g}:{horizon.row_right:g}: the packed path (preset "
+                               "fast) needs a level horizon (one row)")
+        horizon = horizon.row_left
+    try:
+        row = float(horizon)
+    except (TypeError, ValueError):
+        raise HorizonError(f"horizon row must be a number, got {horizon!r}") from None
+    if not np.isfinite(row):
+        raise HorizonError(f"horizon row must be finite, got {row}")
+    return row
 
 
 @dataclass(frozen=True)
@@ -146,14 +188,15 @@ def _band_sums(image: np.ndarray, bp: _BandPlan, params: HorizonParams) -> np.nd
     return sums
 
 
-def extract_packed(image: np.ndarray, row: float, params: HorizonParams) -> PackedBands:
-    """Features of the `params.bands` bands around horizon `row`, the `params.max_features` strongest per band."""
+def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonParams) -> PackedBands:
+    """Features of the `params.bands` bands around horizon `row` (a level HorizonLine is accepted), the
+    `params.max_features` strongest per band."""
     k_max = params.max_features
     if k_max <= 0:
         raise HorizonError("the packed path needs max_features > 0 (a fixed number of slots per band)")
     image = as_gray(np.asarray(image))
     height, width = image.shape
-    bp = _band_plan(height, width, float(row), params)
+    bp = _band_plan(height, width, level_row(row), params)
     n_bands = params.bands
     # Padded integral of each band's signal, as surf1d's (edge samples replicated, a leading 0).
     integral = np.cumsum(_band_sums(image, bp, params)[:, bp.ext_cols], axis=1, dtype=np.float64)
@@ -201,8 +244,9 @@ def stack_packed(views: list[PackedBands]) -> PackedSet:
 
 
 def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
-                 which: np.ndarray | None = None) -> PackedScores:
-    """Scores of `test` against every stored view (or the views `which`), as match_bands with Consensus.SHIFT.
+                 which: np.ndarray | None = None, details: bool = False) -> PackedScores:
+    """Scores of `test` against every stored view (or the views `which`), as match_bands with Consensus.SHIFT;
+    with `details`, also each view's consensus matches (PackedScores.matches, a PackedMatch per view).
 
     Per band: all test features against all stored slots in one product; nearest and second nearest; the ratio
     and sign tests; weights 1 / max(distance, min_distance); NN score = their sum; consensus = the heaviest window
@@ -220,7 +264,7 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
         raise HorizonError(f"test view of key shape {test.keys.shape} against stored views of {(b, ks, d2)}: "
                            "they come from different bands / max_features")
     if p == 0:
-        return PackedScores(np.zeros(0), np.zeros(0))
+        return PackedScores(np.zeros(0), np.zeros(0), [] if details else None)
     sim = np.matmul(test.keys, keys.reshape(b, d2, ks * p))              # (B, Kt, Ks * P)
     # Nearest and second nearest slot in two max passes over a copy whose low mantissa bits carry the slot index;
     # their exact similarities are then read from sim. Non-negative floats order as their int32 bit patterns, and
@@ -249,7 +293,7 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     w = ok / np.sqrt(np.maximum(d1, params.min_distance ** 2))          # 1 / max(distance, min_distance), or 0
     nn = w.sum(axis=(0, 1))
     if not ok.any():
-        return PackedScores(nn, np.zeros(p))
+        return PackedScores(nn, np.zeros(p), [_no_consensus(nn[v]) for v in range(p)] if details else None)
     # The shift histogram of every (band, view) in one bincount; each match adds its weight plus `unit`, so a
     # window's count and weight come out of the same sum (weights of one band sum to less than unit).
     bins = shift_bins(test.x[:, :, None] - xs.ravel()[x_row + j1 * p], params)
@@ -266,7 +310,29 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     count = np.floor(hw / unit)
     hw -= unit * count
     hw[count < params.ransac_min_inliers] = 0.0
-    return PackedScores(nn, hw.max(axis=2).sum(axis=0))
+    consensus = hw.max(axis=2).sum(axis=0)
+    if not details:
+        return PackedScores(nn, consensus)
+    # The consensus matches: those in each (band, view)'s heaviest window, when it qualified.
+    k = hw.argmax(axis=2)                                                # (B, P)
+    k = np.where(hw.max(axis=2) > 0, k, -2)[:, None, :]                  # -2: no window (no bin is -2 or -1)
+    inl = ok & ((bins == k) | (bins == k + 1))                           # (B, Kt, P)
+    x_test = np.broadcast_to(test.x[:, :, None], inl.shape)
+    x_stored = xs.ravel()[x_row + j1 * p]
+    band = np.broadcast_to(np.arange(b)[:, None, None], inl.shape)
+    out = []
+    for v in range(p):
+        m = inl[..., v]
+        xt, xv = x_test[..., v][m], x_stored[..., v][m]
+        b_d = float(np.mean(xt - xv)) if m.any() else float("nan")
+        out.append(PackedMatch(float(nn[v]), float(consensus[v]), 1.0 if m.any() else float("nan"), b_d, xt, xv,
+                               band[..., v][m]))
+    return PackedScores(nn, consensus, out)
+
+
+def _no_consensus(score: float) -> PackedMatch:
+    none = np.zeros(0)
+    return PackedMatch(float(score), 0.0, float("nan"), float("nan"), none, none, np.zeros(0, np.intp))
 
 
 @functools.lru_cache(maxsize=64)
