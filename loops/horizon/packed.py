@@ -51,6 +51,10 @@ class PackedBands:
         """Features per band."""
         return self.valid.sum(axis=1)
 
+    def __len__(self) -> int:
+        """Features over all bands."""
+        return int(self.valid.sum())
+
 
 @dataclass(frozen=True)
 class PackedSet:
@@ -196,7 +200,10 @@ def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonP
         raise HorizonError("the packed path needs max_features > 0 (a fixed number of slots per band)")
     image = as_gray(np.asarray(image))
     height, width = image.shape
-    bp = _band_plan(height, width, level_row(row), params)
+    row = level_row(row)
+    if not 0 <= row <= height - 1:     # bands are moved inside the image at its edges, a horizon is not
+        raise HorizonError(f"horizon row {row:g} is outside the image (rows 0..{height - 1})")
+    bp = _band_plan(height, width, row, params)
     n_bands = params.bands
     # Padded integral of each band's signal, as surf1d's (edge samples replicated, a leading 0).
     integral = np.cumsum(_band_sums(image, bp, params)[:, bp.ext_cols], axis=1, dtype=np.float64)

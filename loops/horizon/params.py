@@ -46,9 +46,12 @@ class HorizonParams(Config):
         # The batched path (loops.horizon.packed): seven 12-row bands sampled every 2 columns, 2 box filters per
         # octave (lobes 3, 5, 9, 17: fewer candidates), the 16 strongest features per band, shift consensus in a 16-px window of at least 2 matches. Chosen on the tuning half of
         # `vslam bench horizon --real-only` as the cheapest setting whose AUC stays well above full-image ORB's
-        # there; the pixel values suit frames of about 120-400 rows, like `bands`.
+        # there; the pixel values suit frames of about 120-400 rows, like `bands`. Its scores sum seven bands, so
+        # its recognition threshold is its own: 220 keeps false positives <= 5 % on that tuning half (4.4 %, 55 %
+        # of matched pairs accepted; reporting half 5.9 % / 53.6 %). The memory, the recogniser and `vslam horizon`
+        # (whose default preset this is) score it through loops.horizon.packed.
         "fast": {"step": 2, "band_height": 12, "bands": 7, "intervals": 2, "max_features": 16, "consensus": "shift",
-                 "ransac_tolerance": 16.0, "ransac_min_inliers": 2},
+                 "ransac_tolerance": 16.0, "ransac_min_inliers": 2, "recognition_threshold": 220.0},
     }
 
     # --- horizon signal (paper §3) ---
@@ -58,8 +61,9 @@ class HorizonParams(Config):
     sample_mode: SampleMode = SampleMode.COLUMN
     bands: int = setting(1, range="[1, inf)",
                          doc="bands of band_height rows stacked around the horizon row, matched band by band "
-                             "by loops.horizon.bands (extract_bands / match_bands); extract_features, the landmark "
-                             "memory and `vslam horizon` read the horizon row's band only")
+                             "by loops.horizon.bands (extract_bands / match_bands) and loops.horizon.packed; the "
+                             "landmark memory, the recogniser and `vslam horizon` read every band on the packed "
+                             "path (preset fast), the horizon row's band only otherwise")
 
     # --- detector (paper §3) ---
     octaves: int = setting(4, range="[1, inf)")
@@ -104,7 +108,9 @@ class HorizonParams(Config):
                         doc="RANSAC sampling seed (results are deterministic for a given seed)")
 
     # --- recognition (paper §4: a threshold on the NN+RANSAC score; theirs was 100 in their units) ---
-    recognition_threshold: float = setting(70.0, doc="~5% false positives on the KITTI bank (`vslam bench horizon`)")
+    recognition_threshold: float = setting(70.0, range="[0, inf)", unit="score (sum of 1 / descriptor distance)",
+                                           doc="~5% false positives on the KITTI bank (`vslam bench horizon`); "
+                                               "preset fast: 220 (its scores sum seven bands)")
 
 
 # The presets by name: the name the package has always exported.
