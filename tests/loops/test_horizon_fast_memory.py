@@ -122,3 +122,19 @@ def test_pairs_file_with_preset_fast_scores_as_match_bands(tmp_path):
     np.testing.assert_allclose([r["score_ransac"] for r in rows[:4]], ref, rtol=1e-5)
     np.testing.assert_allclose(rows[4]["score_ransac"], band_scores(STORED[0], [scene(2)])[0], rtol=1e-5)
     assert [r["a"] for r in rows] == [*names[1:], names[0]]
+
+
+@pytest.mark.parametrize("field,value,message", [
+    ("packed_keys", np.zeros((8, 7, 16, 6), np.float32), "field packed_keys has shape"),
+    ("packed_valid", np.zeros((8, 7, 16)), "field packed_valid has shape"),
+    ("packed_x", np.full((8, 7, 16), np.nan), "non-finite"),
+])
+def test_a_damaged_packed_memory_names_the_file_and_field(tmp_path, field, value, message):
+    fast_recognizer().memory.save(tmp_path / "m.npz")
+    with np.load(tmp_path / "m.npz") as z:
+        data = {k: z[k] for k in z.files}
+    data[field] = value
+    with open(tmp_path / "bad.npz", "wb") as fh:
+        np.savez(fh, **data)
+    with pytest.raises(MemoryFormatError, match=f"bad.npz.*{message}"):
+        load_memory(tmp_path / "bad.npz")
