@@ -23,13 +23,26 @@ from loops.horizon.memory import (
                                   load_memory,
                                   save_memory,
 )
-from loops.horizon.params import PRESETS, HorizonParams, SampleMode
+from loops.horizon.packed import (
+                                  PackedBands,
+                                  PackedMatch,
+                                  PackedScores,
+                                  PackedSet,
+                                  extract_packed,
+                                  match_packed,
+                                  stack_packed,
+                                  uses_packed,
+)
+from loops.horizon.params import PRESETS, Consensus, HorizonParams, SampleMode
 from loops.horizon.recognizer import HorizonRecognizer, HorizonVerifier
 from loops.horizon.signal import HorizonError, HorizonLine, horizon_signal, sample_columns
 from loops.horizon.surf1d import HorizonFeatures, detect_and_describe, extract_features, lobe_sizes, responses
+from loops.horizon.views import HorizonMatch, HorizonView, extract_view, match_views, score_views
 
 __all__ = [
-    "BandsMatch", "band_rows", "extract_bands", "match_bands", "HorizonError", "HorizonFeatures", "HorizonLine", "HorizonParams", "HorizonRecognizer", "HorizonVerifier",
+    "BandsMatch", "Consensus", "HorizonMatch", "HorizonView", "PackedBands", "PackedMatch", "PackedScores",
+    "PackedSet", "extract_packed", "extract_view", "match_packed", "match_views", "score_views", "stack_packed",
+    "uses_packed", "band_rows", "extract_bands", "match_bands", "HorizonError", "HorizonFeatures", "HorizonLine", "HorizonParams", "HorizonRecognizer", "HorizonVerifier",
     "Landmark", "LandmarkMemory", "MEMORY_VERSION", "MatchResult", "MemoryFormatError", "PRESETS", "Recognition",
     "SampleMode", "detect_and_describe", "extract_features", "fit_line_ransac", "horizon_signal", "load_memory",
     "lobe_sizes", "match", "nn_matches", "responses", "sample_columns", "save_memory",

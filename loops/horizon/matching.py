@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from loops.horizon.params import HorizonParams
+from loops.horizon.params import Consensus, HorizonParams
 from loops.horizon.surf1d import SIGN_WEIGHT, HorizonFeatures
 from odometry.shared.ransac import all_pairs, find_consensus, refit_if_not_worse, sample_pairs
 
@@ -186,6 +186,42 @@ def match(test: HorizonFeatures, stored: HorizonFeatures, params: HorizonParams 
     if pairs.shape[0] < params.ransac_min_inliers:
         return _no_match(pairs, dist, score)
     ti, si = pairs[:, 0], pairs[:, 1]
+    if params.consensus is Consensus.SHIFT:
+        s_score, b_d, inl = shift_consensus(test.x[ti] - stored.x[si], w, params)
+        return MatchResult(score, s_score, 1.0 if inl.any() else float("nan"), b_d, pairs, dist, inl)
     lsr = np.log2(test.scale[ti] / stored.scale[si]) if params.scale_tolerance > 0 else None
     b_s, b_d, inl = fit_line_ransac(test.x[ti], stored.x[si], params, lsr)
     return MatchResult(score, float(w[inl].sum()), b_s, b_d, pairs, dist, inl)
+
+
+def shift_bins(shift: np.ndarray, params: HorizonParams) -> np.ndarray:
+    """Histogram bin of each shift x_test - x_stored (pixels): bins ransac_tolerance px wide, anchored at 0."""
+    return np.floor(shift / params.ransac_tolerance).astype(np.intp)
+
+
+def shift_consensus(shift: np.ndarray, weights: np.ndarray, params: HorizonParams
+                    ) -> tuple[float, float, np.ndarray]:
+    """Consensus.SHIFT: the heaviest window of two adjacent bins (2 * ransac_tolerance px) of the match shifts.
+
+    A window holding fewer than ransac_min_inliers matches scores 0. Returns (its weight sum, the mean shift of its
+    matches = b_d with b_s = 1, its matches as a mask); (0, NaN, none) when no window qualifies. Any cluster of
+    shifts at most ransac_tolerance wide falls inside one window, as the RANSAC line's inliers lie within
+    ransac_tolerance of the line; what is lost is b_s (moving closer or away), which a long horizon needs and a
+    turn does not.
+    """
+    m = shift.shape[0]
+    none = (0.0, float("nan"), np.zeros(m, bool))
+    if m < params.ransac_min_inliers:
+        return none
+    b = shift_bins(shift, params)
+    b -= b.min()
+    n_bins = int(b.max()) + 2
+    h = np.bincount(b, weights=weights, minlength=n_bins)
+    c = np.bincount(b, minlength=n_bins)
+    hw = h[:-1] + h[1:]
+    hw[(c[:-1] + c[1:]) < params.ransac_min_inliers] = 0.0
+    k = int(np.argmax(hw))
+    if hw[k] <= 0:
+        return none
+    inl = (b == k) | (b == k + 1)
+    return float(hw[k]), float(shift[inl].mean()), inl

@@ -2,7 +2,9 @@
 
 On disk a memory is one .npz (written atomically, loaded without pickle) holding a format version, the
 HorizonParams the features were extracted with (a query must be extracted with the same ones), and every
-landmark's features concatenated, with per-landmark counts.
+landmark's features concatenated, with per-landmark counts. With parameters of the packed path (preset `fast`,
+loops.horizon.packed) each landmark is its packed bands instead (format version 2: arrays packed_x, packed_keys,
+packed_valid, one row per landmark), and recognition scores a view against every landmark in one call.
 """
 from __future__ import annotations
 
@@ -15,13 +17,14 @@ from pathlib import Path
 import numpy as np
 
 from loops.errors import LoopsError
-from loops.horizon.matching import MatchResult, match
+from loops.horizon.packed import PackedBands, PackedSet, uses_packed
 from loops.horizon.params import HorizonParams
 from loops.horizon.signal import HorizonLine
 from loops.horizon.surf1d import HorizonFeatures
+from loops.horizon.views import HorizonMatch, HorizonView, check_view, match_views, score_views, stack_views
 from odometry.shared.atomic_io import atomic_path
 
-MEMORY_VERSION = 1
+MEMORY_VERSION = 2      # 2: packed landmarks (preset fast); version 1 files (per-pair features) are still read
 _FORMAT = "vslam.horizon.memory"
 
 
@@ -32,7 +35,7 @@ class MemoryFormatError(LoopsError):
 @dataclass(frozen=True)
 class Landmark:
     name: str
-    features: HorizonFeatures
+    features: HorizonView                # HorizonFeatures, or PackedBands on the packed path
     source: str = ""                     # where the features came from (an image path), for the user
     horizon: HorizonLine = HorizonLine(float("nan"), float("nan"))
 
@@ -42,13 +45,14 @@ class Recognition:
     """Which stored landmark a horizon shows.
 
     name: the best landmark when its NN+RANSAC score reaches the threshold, else None.
-    best: the best-scoring landmark whatever the threshold (None for an empty memory); result: its MatchResult.
-    scores: NN+RANSAC score against every landmark, in memory order.
+    best: the best-scoring landmark whatever the threshold (None for an empty memory); result: its match
+        (MatchResult, or PackedMatch on the packed path).
+    scores: NN+RANSAC (packed: NN+shift) score against every landmark, in memory order.
     """
 
     name: str | None
     best: str | None
-    result: MatchResult | None
+    result: HorizonMatch | None
     scores: dict[str, float]
     threshold: float
 
@@ -61,6 +65,7 @@ class Recognition:
 class LandmarkMemory:
     params: HorizonParams = field(default_factory=HorizonParams)
     landmarks: list[Landmark] = field(default_factory=list)
+    _stacked: tuple[int, PackedSet | None] | None = field(default=None, init=False, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.landmarks)
@@ -69,15 +74,18 @@ class LandmarkMemory:
     def names(self) -> list[str]:
         return [lm.name for lm in self.landmarks]
 
-    def add(self, name: str, features: HorizonFeatures, source: str = "",
+    @property
+    def packed(self) -> bool:
+        """Whether the memory scores on the packed path (its parameters allow it: preset fast)."""
+        return uses_packed(self.params)
+
+    def add(self, name: str, features: HorizonView, source: str = "",
             horizon: HorizonLine | float | None = None) -> Landmark:
-        """Memorise `features` under `name` (names are unique)."""
+        """Memorise `features` (loops.horizon.views.extract_view with the memory's parameters) under `name` (names
+        are unique)."""
         if name in self.names:
             raise LoopsError(f"landmark {name!r} is already in the memory")
-        dim = 2 * self.params.subregions
-        if features.descriptor.ndim != 2 or features.descriptor.shape[1] != dim:
-            raise LoopsError(f"landmark {name!r}: descriptors of size {features.descriptor.shape[1:]} do not match "
-                             f"the memory's parameters (size {dim})")
+        check_view(features, self.params, f"landmark {name!r}")
         if horizon is None:
             horizon = HorizonLine(float("nan"), float("nan"))
         elif not isinstance(horizon, HorizonLine):
@@ -86,21 +94,31 @@ class LandmarkMemory:
         self.landmarks.append(lm)
         return lm
 
-    def match_all(self, features: HorizonFeatures) -> list[MatchResult]:
-        return [match(features, lm.features, self.params) for lm in self.landmarks]
+    def match_all(self, features: HorizonView) -> list[HorizonMatch]:
+        return match_views(features, [lm.features for lm in self.landmarks], self.params)
 
-    def recognise(self, features: HorizonFeatures, threshold: float | None = None) -> Recognition:
+    def scores(self, features: HorizonView, among: int | None = None) -> np.ndarray:
+        """NN+consensus score against the first `among` landmarks (default all), in memory order; on the packed
+        path one call over the landmarks stacked once (restacked only after an add)."""
+        check_view(features, self.params, "query view")
+        views = [lm.features for lm in self.landmarks]
+        if self._stacked is None or self._stacked[0] != len(views):
+            self._stacked = (len(views), stack_views(views, self.params))
+        return score_views(features, views, self.params, self._stacked[1], among)
+
+    def recognise(self, features: HorizonView, threshold: float | None = None) -> Recognition:
         """Match `features` against every landmark; recognised when the best NN+RANSAC score >= threshold
         (default params.recognition_threshold)."""
         thr = self.params.recognition_threshold if threshold is None else float(threshold)
-        results = self.match_all(features)
-        scores = {lm.name: r.score_ransac for lm, r in zip(self.landmarks, results)}
-        if not results:
+        s = self.scores(features)
+        scores = {lm.name: float(v) for lm, v in zip(self.landmarks, s)}
+        if not len(s):
             return Recognition(None, None, None, scores, thr)
-        k = int(np.argmax([r.score_ransac for r in results]))
+        k = int(np.argmax(s))
         best = self.landmarks[k].name
-        name = best if results[k].score_ransac >= thr else None
-        return Recognition(name, best, results[k], scores, thr)
+        result = match_views(features, [self.landmarks[k].features], self.params)[0]
+        name = best if result.score_ransac >= thr else None
+        return Recognition(name, best, result, scores, thr)
 
     def save(self, path: str | os.PathLike) -> None:
         save_memory(self, path)
@@ -130,10 +148,16 @@ def save_memory(memory: LandmarkMemory, path: str | os.PathLike) -> None:
         "horizons": np.array([[lm.horizon.row_left, lm.horizon.row_right] for lm in lms],
                              dtype=np.float64).reshape(len(lms), 2),
         "widths": np.array([lm.features.width for lm in lms], dtype=np.int64),
-        "counts": np.array([len(lm.features) for lm in lms], dtype=np.int64),
+        "counts": np.array([0 if memory.packed else len(lm.features) for lm in lms], dtype=np.int64),
     }
+    if memory.packed:
+        p = memory.params
+        shape = (len(lms), p.bands, p.max_features)
+        arrays["packed_x"] = np.array([lm.features.x for lm in lms], np.float64).reshape(shape)
+        arrays["packed_keys"] = np.array([lm.features.keys for lm in lms], np.float32).reshape(*shape, dim + 1)
+        arrays["packed_valid"] = np.array([lm.features.valid for lm in lms], bool).reshape(shape)
     for name, dtype in _FEATURE_FIELDS.items():
-        parts = [np.asarray(getattr(lm.features, name), dtype=dtype) for lm in lms]
+        parts = [] if memory.packed else [np.asarray(getattr(lm.features, name), dtype=dtype) for lm in lms]
         empty = np.zeros((0, dim) if name == "descriptor" else 0, dtype)
         arrays[name] = np.concatenate(parts) if parts else empty
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
@@ -164,8 +188,8 @@ def load_memory(path: str | os.PathLike) -> LandmarkMemory:
     if str(data["format"]) != _FORMAT:
         raise bad(f"format is {str(data['format'])!r}, expected {_FORMAT!r}")
     version = int(data["version"])
-    if version != MEMORY_VERSION:
-        raise bad(f"version {version} is not supported (this code reads version {MEMORY_VERSION})")
+    if version not in (1, MEMORY_VERSION):
+        raise bad(f"version {version} is not supported (this code reads versions 1 to {MEMORY_VERSION})")
     try:
         params = HorizonParams.from_dict(json.loads(str(data["params"])))
     except (ValueError, TypeError) as exc:
@@ -186,12 +210,34 @@ def load_memory(path: str | os.PathLike) -> LandmarkMemory:
     if len(set(names.tolist())) != n_lm:
         raise bad("landmark names are not unique")
     memory = LandmarkMemory(params)
+    views = _packed_views(data, params, n_lm, bad) if memory.packed else None
     ends = np.cumsum(counts)
     starts = ends - counts
     for i in range(n_lm):
-        sl = slice(int(starts[i]), int(ends[i]))
-        feats = HorizonFeatures(**{k: data[k][sl].astype(t) for k, t in _RUNTIME_DTYPES.items()},
-                                width=int(data["widths"][i]))
+        if views is not None:
+            feats = views[i]
+        else:
+            sl = slice(int(starts[i]), int(ends[i]))
+            feats = HorizonFeatures(**{k: data[k][sl].astype(t) for k, t in _RUNTIME_DTYPES.items()},
+                                    width=int(data["widths"][i]))
         h = data["horizons"][i]
         memory.add(str(names[i]), feats, str(data["sources"][i]), HorizonLine(float(h[0]), float(h[1])))
     return memory
+
+
+def _packed_views(data: dict, params: HorizonParams, n_lm: int, bad) -> list[PackedBands]:
+    """The landmarks of a memory on the packed path, every array checked against the parameters first."""
+    shape = (n_lm, params.bands, params.max_features)
+    expect = {"packed_x": (shape, "f"), "packed_keys": ((*shape, 2 * params.subregions + 1), "f"),
+              "packed_valid": (shape, "b")}
+    for k, (want, kind) in expect.items():
+        if k not in data:
+            raise bad(f"field {k} is missing: its parameters (preset fast) need packed landmarks; a memory written "
+                      "before version 2 with these parameters must be memorised again")
+        if data[k].shape != want or data[k].dtype.kind != kind:
+            raise bad(f"field {k} has shape {data[k].shape} ({data[k].dtype}), expected {want} for {n_lm} landmarks "
+                      f"of {params.bands} bands x {params.max_features} features")
+    if not (np.all(np.isfinite(data["packed_x"])) and np.all(np.isfinite(data["packed_keys"]))):
+        raise bad("fields packed_x / packed_keys hold non-finite values")
+    return [PackedBands(data["packed_x"][i].astype(np.float64), data["packed_keys"][i].astype(np.float32),
+                        data["packed_valid"][i].astype(bool), int(data["widths"][i])) for i in range(n_lm)]

@@ -15,7 +15,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from loops.horizon import HorizonError, HorizonFeatures, HorizonLine, HorizonParams, extract_features, match
+from loops.horizon.params import HorizonParams
+from loops.horizon.signal import HorizonError, HorizonLine
+from loops.horizon.views import HorizonView, extract_view, match_views
 from odometry.shared.atomic_io import atomic_path
 
 PAIRS_COLUMNS = ("a", "b", "row_a", "row_b")
@@ -44,11 +46,11 @@ def read_gray_image(path: Path) -> np.ndarray:
     return img
 
 
-def extract_file_features(path: Path, horizon, params: HorizonParams) -> HorizonFeatures:
-    """1D SURF features of the horizon of an image file (errors name the file)."""
+def extract_file_features(path: Path, horizon, params: HorizonParams) -> HorizonView:
+    """1D SURF features of the horizon of an image file (packed bands on the packed path; errors name the file)."""
     img = read_gray_image(path)
     try:
-        return extract_features(img, horizon, params)
+        return extract_view(img, horizon, params)
     except HorizonError as exc:
         raise HorizonError(f"{path}: {exc}") from None
 
@@ -59,7 +61,7 @@ class FeatureCache:
     def __init__(self, params: HorizonParams, size: int = 2048):
         self.params, self.size, self.data = params, size, OrderedDict()
 
-    def get(self, path: Path, horizon) -> HorizonFeatures:
+    def get(self, path: Path, horizon) -> HorizonView:
         key = (str(path), repr(horizon))
         if key in self.data:
             self.data.move_to_end(key)
@@ -106,11 +108,19 @@ def score_pairs_file(pairs_csv: Path, out_csv: Path, params: HorizonParams) -> l
         raise HorizonError(f"{pairs_csv} line 1: column(s) {', '.join(clash)} would be overwritten by the scores")
     base = pairs_csv.parent
     cache = FeatureCache(params)
+    # The pairs of one test view are scored in one call (on the packed path that is what makes it cheap).
+    groups: dict[tuple[str, str], list[int]] = OrderedDict()
+    for i, row in enumerate(rows):
+        groups.setdefault((row["b"], repr(row["_row_b"])), []).append(i)
+    results: list = [None] * len(rows)
+    for idx in groups.values():
+        first = cache.get(base / rows[idx[0]]["a"], rows[idx[0]]["_row_a"])    # a, then b: the file's order
+        fb = cache.get(base / rows[idx[0]]["b"], rows[idx[0]]["_row_b"])
+        stored = [first] + [cache.get(base / rows[i]["a"], rows[i]["_row_a"]) for i in idx[1:]]
+        for i, r in zip(idx, match_views(fb, stored, params)):
+            results[i] = r
     out_rows = []
-    for row in rows:
-        fa = cache.get(base / row["a"], row["_row_a"])
-        fb = cache.get(base / row["b"], row["_row_b"])
-        r = match(fb, fa, params)
+    for row, r in zip(rows, results):
         out = {c: row[c] for c in header}
         out.update(score=r.score, score_ransac=r.score_ransac, b_s=r.b_s, b_d=r.b_d)
         out_rows.append(out)

@@ -37,7 +37,7 @@ class HorizonLine:
         return self.row_left + (self.row_right - self.row_left) * t
 
 
-def _as_gray(image: np.ndarray) -> np.ndarray:
+def as_gray(image: np.ndarray) -> np.ndarray:
     if image.ndim == 2:
         return image
     if image.ndim == 3 and image.shape[2] in (3, 4):
@@ -66,7 +66,7 @@ def horizon_signal(image: np.ndarray, horizon: float | HorizonLine, params: Hori
     (SampleMode.COLUMN, the paper) or over columns [k * step, (k + 1) * step) (SampleMode.BOX); see
     `sample_columns`. Raises HorizonError when the band leaves the image.
     """
-    image = _as_gray(np.asarray(image))
+    image = as_gray(np.asarray(image))
     height, width = image.shape
     band, step = params.band_height, params.step
     box = params.sample_mode is SampleMode.BOX

@@ -99,7 +99,7 @@ def min_signal_length(params: HorizonParams) -> int:
 
 
 @dataclass(frozen=True)
-class _Plan:
+class SignalPlan:
     """Index tables for one (signal length, params): built once, reused for every horizon of that length.
 
     Candidates are the positions each level is evaluated at: every sample in octave 0, every 2^o-th in octave o
@@ -121,7 +121,7 @@ class _Plan:
 
 
 @functools.lru_cache(maxsize=32)
-def _plan(n: int, params: HorizonParams) -> _Plan:
+def signal_plan(n: int, params: HorizonParams) -> SignalPlan:
     lobes = lobe_sizes(params)
     half = (lobes - 1) // 2
     s = 0.4 * lobes  # SURF: s = 1.2 * L / 9 with L = 3 * lobe
@@ -171,7 +171,7 @@ def _plan(n: int, params: HorizonParams) -> _Plan:
     tables = (cand_level, cand_pos, resp_idx, resp_weight, desc_idx, desc_haar, desc_abs, columns)
     for a in tables:
         a.setflags(write=False)
-    return _Plan(n, min_signal_length(params), pad, cand_level, cand_pos, resp_idx, resp_weight, desc_idx,
+    return SignalPlan(n, min_signal_length(params), pad, cand_level, cand_pos, resp_idx, resp_weight, desc_idx,
                  desc_haar, desc_abs, s * params.step, columns)
 
 
@@ -182,7 +182,7 @@ def responses(signal: np.ndarray, params: HorizonParams = HorizonParams()) -> tu
     The response is zero where a filter does not fit in the signal.
     """
     signal = np.asarray(signal, dtype=np.float64)
-    plan = _plan(len(signal), params)
+    plan = signal_plan(len(signal), params)
     return plan.cand_level, plan.cand_pos, _responses(_padded_integral(signal, plan.pad), plan)
 
 
@@ -197,11 +197,11 @@ def _padded_integral(signal: np.ndarray, pad: int) -> np.ndarray:
     return np.cumsum(buf, out=buf)
 
 
-_RESP_COEF = np.array([1.0, -1.0, -3.0, 3.0])
+RESP_COEF = np.array([1.0, -1.0, -3.0, 3.0])
 
 
-def _responses(integral: np.ndarray, plan: _Plan) -> np.ndarray:
-    r = _RESP_COEF @ integral[plan.resp_idx]
+def _responses(integral: np.ndarray, plan: SignalPlan) -> np.ndarray:
+    r = RESP_COEF @ integral[plan.resp_idx]
     r *= plan.resp_weight
     return r
 
@@ -212,7 +212,7 @@ def detect_and_describe(signal: np.ndarray, params: HorizonParams = HorizonParam
     if signal.ndim != 1:
         raise HorizonError(f"a horizon signal is one-dimensional, got shape {signal.shape}")
     n = signal.shape[0]
-    plan = _plan(n, params)
+    plan = signal_plan(n, params)
     if n < plan.min_length:
         raise HorizonError(
             f"horizon signal too short: {n} samples (image width / step {params.step}); 1D SURF needs at least "
@@ -225,6 +225,9 @@ def detect_and_describe(signal: np.ndarray, params: HorizonParams = HorizonParam
     c = a[1:-1]
     idx = np.flatnonzero((c > np.maximum(a[:-2], params.threshold)) & (c >= a[2:]))
     idx += 1
+    if 0 < params.max_features < idx.size:
+        # The strongest by |response| (ties: the first position), kept in position order.
+        idx = np.sort(idx[np.argsort(-a[idx], kind="stable")[:params.max_features]])
     if idx.size == 0:
         return HorizonFeatures.empty(n * params.step, 2 * params.subregions)
 

@@ -73,10 +73,34 @@ def unpack_arrays(buf: bytes, source: str = "<bytes>") -> tuple[dict, dict[str, 
         header, dict) else None
     if not isinstance(table, list) or not isinstance(meta, dict):
         raise VocabFileError(f"{source}: corrupted header (no array table or meta)")
-    arrays = {}
+    arrays: dict[str, np.ndarray] = {}
+    expected = 0     # pack_arrays lays the arrays back to back in table order, each padded to the alignment
     for i, e in enumerate(table):
-        arrays.update(_array_entry(e, i, data, source))
+        entry = _array_entry(e, i, data, source)
+        name, a = next(iter(entry.items()))
+        if name in arrays:
+            raise VocabFileError(f"{source}: corrupted header (array entry {i}: name {name!r} appears twice)")
+        if e["offset"] != expected:
+            raise VocabFileError(_layout_error(source, table, i, expected))
+        expected += a.nbytes + _pad(a.nbytes)
+        arrays[name] = a
+    if expected != len(data):
+        raise VocabFileError(_layout_error(source, table, len(table), expected, len(data)))
     return meta, arrays
+
+
+def _layout_error(source: str, table: list, i: int, expected: int, size: int | None = None) -> str:
+    """Why the array table does not describe the data it heads. The checksum protects only the data, so the
+    table's shapes, dtypes and offsets must account for every data byte: a shape or dtype changed in the header
+    (say a descriptor width of 0) leaves bytes unclaimed and is caught here, before any array is used."""
+    prev = table[i - 1] if i else None
+    before = (f"array {prev['name']!r} (shape {prev['shape']}, dtype {prev['dtype']!r}) ends at byte {expected}"
+              if prev else "the data starts at byte 0")
+    if size is None:
+        where = f"array entry {i} {table[i]['name']!r} has offset {table[i]['offset']}"
+    else:
+        where = f"the data holds {size} bytes"
+    return f"{source}: corrupted header ({before} but {where}; a shape, dtype or offset in the array table is wrong)"
 
 
 def _array_entry(e, i: int, data: memoryview, source: str) -> dict[str, np.ndarray]:

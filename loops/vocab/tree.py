@@ -85,6 +85,8 @@ class VocabularyTree:
                 or not np.issubdtype(children.dtype, np.signedinteger)
                 or not np.issubdtype(word.dtype, np.signedinteger) or centres.dtype != want):
             raise VocabFileError("vocabulary arrays have the wrong types or dimensions")
+        if centres.shape[1] == 0:    # rows of no bytes would reach the distance kernels as empty words
+            raise VocabFileError("vocabulary centres have width 0 (field 'centres' shape)")
         if not (len(children) == len(word) == len(centres)) or children.shape[1] != meta["k"]:
             raise VocabFileError("vocabulary arrays have inconsistent shapes")
         if (children.max(initial=-1) >= len(children) or children.min(initial=-1) < -1

@@ -273,4 +273,4 @@ def test_params_validate_and_round_trip():
     with pytest.raises(ValueError, match="unknown HorizonParams field"):
         HorizonParams.from_dict({"band": 3})
     with pytest.raises(ValueError, match="unknown horizon preset"):
-        HorizonParams.preset("fast")
+        HorizonParams.preset("quickest")

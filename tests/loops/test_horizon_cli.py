@@ -42,7 +42,7 @@ def test_pairs_scores_every_pair_and_keeps_extra_columns(images, tmp_path):
         f"north.png,{images['south']},60,60,0\n"
         f"south.png,elsewhere.png,60,58:62,0\n")                  # LEFT:RIGHT: a tilted horizon line
     out = tmp_path / "scores.csv"
-    assert main(["horizon", "pairs", str(rel), "--out", str(out)]) == 0
+    assert main(["horizon", "pairs", str(rel), "--out", str(out), "--preset", "paper"]) == 0   # the paper's line
     rows = _read_csv(out)
     assert list(rows[0].keys()) == ["a", "b", "row_a", "row_b", "label", "score", "score_ransac", "b_s", "b_d"]
     assert len(rows) == 3
@@ -76,15 +76,23 @@ def test_pairs_bad_input_is_one_clear_line(tmp_path, capsys, content, message):
 def test_pairs_horizon_outside_image_names_the_image(images, tmp_path, capsys):
     pairs = tmp_path / "pairs.csv"
     pairs.write_text(f"a,b,row_a,row_b\n{images['north']},{images['south']},60,115\n")
-    assert main(["horizon", "pairs", str(pairs), "--out", str(tmp_path / "s.csv")]) == 2
+    assert main(["horizon", "pairs", str(pairs), "--out", str(tmp_path / "s.csv"), "--preset", "paper"]) == 2
     err = capsys.readouterr().err
     assert "south.png" in err and "horizon row 115" in err
+    # the default (fast) moves its bands inside the image, but a horizon outside it is still an error
+    pairs.write_text(f"a,b,row_a,row_b\n{images['north']},{images['south']},60,500\n")
+    assert main(["horizon", "pairs", str(pairs), "--out", str(tmp_path / "s.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "south.png" in err and "horizon row 500 is outside the image" in err and err.count("\n") == 1
+    pairs.write_text(f"a,b,row_a,row_b\n{images['north']},{images['south']},60,58:62\n")
+    assert main(["horizon", "pairs", str(pairs), "--out", str(tmp_path / "s.csv")]) == 2
+    assert "needs a level horizon" in capsys.readouterr().err
 
 
 def test_memorise_then_recognise(images, tmp_path, capsys):
     mem = tmp_path / "landmarks.npz"
     assert main(["horizon", "memorise", str(images["north"]), str(images["south"]), "--row", "60",
-                 "--out", str(mem)]) == 0
+                 "--out", str(mem), "--preset", "paper"]) == 0
     assert mem.exists()
     capsys.readouterr()
     js = tmp_path / "rec.json"
@@ -120,3 +128,26 @@ def test_set_overrides_and_presets(images, tmp_path, capsys):
     assert "unknown HorizonParams field(s): nope" in capsys.readouterr().err
     assert main(["horizon", "pairs", str(pairs), "--out", str(tmp_path / "s.csv"), "--set", "ratio=3"]) == 2
     assert "ratio must be in (0, 1]" in capsys.readouterr().err
+
+
+def test_the_default_preset_is_fast_and_memorises_every_band(images, tmp_path, capsys):
+    """`vslam horizon` defaults to preset fast (the packed path: seven bands, one call per query)."""
+    from loops.horizon import HorizonParams, load_memory
+
+    mem = tmp_path / "fast.npz"
+    assert main(["horizon", "memorise", str(images["north"]), str(images["south"]), "--row", "60",
+                 "--out", str(mem)]) == 0
+    memory = load_memory(mem)
+    assert memory.params == HorizonParams.preset("fast") and memory.packed
+    capsys.readouterr()
+    js = tmp_path / "rec.json"
+    assert main(["horizon", "recognise", str(mem), str(images["north_turned"]), str(images["elsewhere"]),
+                 "--row", "60", "--json", str(js)]) == 0
+    res = json.loads(js.read_text())
+    assert res[0]["landmark"] == "north" and res[1]["landmark"] is None
+    assert res[0]["b_s"] == 1.0 and res[0]["b_d"] == pytest.approx(60, abs=20)    # the turn; no scale on this path
+    assert res[0]["threshold"] == HorizonParams.preset("fast").recognition_threshold
+    # --append keeps the memory's parameters; a preset given with it is refused
+    assert main(["horizon", "memorise", str(images["elsewhere"]), "--row", "60", "--out", str(mem), "--append",
+                 "--preset", "fast"]) == 2
+    assert "--append uses the parameters stored in the memory" in capsys.readouterr().err

@@ -102,7 +102,7 @@ def _rewrite(src, dst, **changes):
 
 
 @pytest.mark.parametrize("change,message", [
-    ({"version": np.array(MEMORY_VERSION + 1)}, "version 2 is not supported"),
+    ({"version": np.array(MEMORY_VERSION + 1)}, f"version {MEMORY_VERSION + 1} is not supported"),
     ({"descriptor": None}, "missing field"),
     ({"counts": np.array([1, 2, 3])}, "field x has shape"),
     ({"format": np.array("something.else")}, "format is"),

@@ -1,5 +1,6 @@
 """The place-recognition contract (loops.recognition), one suite over the three recognisers: cdvs compact
-descriptors, the vocabulary tree (with the shipped floor vocabulary) and 1D SURF horizons."""
+descriptors, the vocabulary tree (with the shipped floor vocabulary) and 1D SURF horizons (per pair, and packed:
+preset fast)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 from loops.cdvs.recognizer import CdvsRecognizer, CdvsVerifier
+from loops.horizon import HorizonParams
 from loops.horizon.recognizer import HorizonRecognizer, HorizonVerifier
 from loops.recognition import Ranked, Recognizer, Verification, Verifier
 from loops.vocab.floor_vocabulary import load_floor_vocabulary
@@ -50,7 +52,16 @@ def _horizon() -> Case:
                 [horizon_image(lambda x, s=s: skyline(x, s)) for s in (21, 23, 24)])
 
 
-CASES = {"cdvs": _cdvs, "vocab": _vocab, "horizon": _horizon}
+def _horizon_fast() -> Case:
+    """The packed path (preset fast): the recogniser scores every stored view in one call."""
+    params = HorizonParams.preset("fast")
+    return Case(lambda: (HorizonRecognizer(60, params), HorizonVerifier(params)),
+                horizon_image(lambda x: skyline(x, 22)), horizon_image(lambda x: skyline(x + 50, 22)),
+                horizon_image(lambda x: skyline(x, 99)),
+                [horizon_image(lambda x, s=s: skyline(x, s)) for s in (21, 23, 24)])
+
+
+CASES = {"cdvs": _cdvs, "vocab": _vocab, "horizon": _horizon, "horizon-fast": _horizon_fast}
 
 
 @pytest.fixture(scope="module", params=sorted(CASES))

@@ -26,7 +26,8 @@ from loops.horizon.pairs_file import SCORE_COLUMNS, score_pairs_file
 from odometry.shared.atomic_io import atomic_path, atomic_write_text
 from vslam.app.horizon import horizon_params
 from vslam.bench.horizon_bank import SNIPPETS, Bank, build_bank, load_crops
-from vslam.bench.horizon_real import real_pairs_table
+from vslam.bench.horizon_fast import PairSet, compare
+from vslam.bench.horizon_real import build_real_bank, real_pairs_table
 from vslam.bench.results import BenchResult, write_json
 from vslam.evaluation.plots import plot_roc_curves
 from vslam.evaluation.tables import format_table
@@ -145,6 +146,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="only the real pairs (corridor + KITTI pairs: 1D SURF vs ORB + RANSAC), not the crop bank")
     parser.add_argument("--bands-preset", default="bands",
                         help="HorizonParams preset of the multi-band 1D SURF on the real pairs (default: %(default)s)")
+    parser.add_argument("--fast-preset", default="fast",
+                        help="HorizonParams preset of the packed 1D SURF compared with ORB + RANSAC per image and "
+                             "per pair (default: %(default)s)")
     parser.add_argument("--threads", type=int, default=1,
                         help="OpenCV threads for SIFT; 1 compares single core with single core (default: 1)")
 
@@ -302,6 +306,29 @@ def _real(args: argparse.Namespace, data_dir: Path) -> tuple[str, dict]:
     print("real pairs (corridor + KITTI pairs): 1D SURF vs ORB + RANSAC ...", flush=True)
     text, res = real_pairs_table(data_dir, HorizonParams.preset(args.bands_preset))
     print(text, flush=True)
+    print("real pairs: packed 1D SURF vs ORB + RANSAC, per image and per pair ...", flush=True)
+    bank = build_real_bank(data_dir)
+    fast_table, fast_res = compare(PairSet(bank.images, bank.rows, bank.pairs, bank.labels, bank.half),
+                                   HorizonParams.preset(args.fast_preset),
+                                   {"tuning": 0, "reporting": 1})
+    head = (f"Packed 1D SURF (preset {args.fast_preset}) against ORB + RANSAC on the same real pairs, thread CPU "
+            f"time, the methods taking turns every 16 images / test views (definitions in "
+            f"vslam/bench/horizon_fast.py and docs/benchmarks.md).")
+    print(f"{head}\n\n{fast_table}", flush=True)
+    res["packed_vs_orb"] = fast_res
+    return f"{text}\n\n{head}\n\n{fast_table}", res
+
+
+def _crop_bank_fast(args: argparse.Namespace, bank: Bank) -> tuple[str, dict]:
+    """The packed 1D SURF against ORB + RANSAC on our own crop bank (nothing was tuned on it)."""
+    print("crop bank: packed 1D SURF vs ORB + RANSAC, per image and per pair ...", flush=True)
+    crops = load_crops(bank)
+    names = [str(i) for i in range(len(bank.views))]
+    ps = PairSet(dict(zip(names, crops)), {n: float(v.row) for n, v in zip(names, bank.views)},
+                 [(names[a], names[b]) for a, b in bank.pairs], bank.labels, np.zeros(len(bank.pairs), int))
+    table, res = compare(ps, HorizonParams.preset(args.fast_preset), {"crop bank (all; nothing tuned here)": None})
+    text = f"Packed 1D SURF (preset {args.fast_preset}) against ORB + RANSAC on the crop bank above.\n\n{table}"
+    print(text, flush=True)
     return text, res
 
 
@@ -337,6 +364,7 @@ def run(args: argparse.Namespace) -> BenchResult:
     scored, pair_auc, kitti_line = _kitti_pairs(data_dir, args.out, params)
     print(kitti_line)
     real_text, real_res = _real(args, data_dir)
+    crop_fast_text, crop_fast_res = _crop_bank_fast(args, bank)
     cv2.setNumThreads(max(1, args.threads))
 
     write_json(args.out / "horizon.json", {
@@ -356,10 +384,11 @@ def run(args: argparse.Namespace) -> BenchResult:
         "sift_features_cap": args.sift_features, "opencv_threads": args.threads,
         "nn_ransac_at_5pct_fpr": {"tpr": tpr5, "threshold": thr5},
         "kitti_pairs": {"auc": pair_auc, "pairs": scored}, "real_pairs": real_res,
+        "crop_bank_packed_vs_orb": crop_fast_res,
         "table": table, "sweep_table": sweep_table,
     })
     print(f"wrote {args.out / 'horizon.json'}, {args.out / 'roc.png'}, {args.out / 'bank_scores.csv'}")
-    return BenchResult(f"{table}\n\n{sweep_table}\n\n" + "\n\n".join(lines + [kitti_line, real_text]))
+    return BenchResult(f"{table}\n\n{sweep_table}\n\n" + "\n\n".join(lines + [kitti_line, real_text, crop_fast_text]))
 
 
 def _argv_echo(args: argparse.Namespace) -> list[str]:
@@ -370,4 +399,5 @@ def _argv_echo(args: argparse.Namespace) -> list[str]:
     out += ["--no-sift"] if args.no_sift else []
     out += ["--quick"] if args.quick else []
     out += ["--real-only"] if args.real_only else []
+    out += [f"--fast-preset {args.fast_preset}"]
     return out

@@ -50,7 +50,8 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _add_params_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", default="paper", help="HorizonParams preset (default: %(default)s)")
+    p.add_argument("--preset", default=None,
+                   help="HorizonParams preset: fast (default; every band, packed scoring), paper, robust, bands")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="FIELD=VALUE",
                    help="override a HorizonParams field, e.g. --set threshold=20 (repeatable)")
 

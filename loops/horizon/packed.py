@@ -1,0 +1,354 @@
+"""Multi-band 1D SURF in fixed-size arrays: one image's bands extracted in one pass, one test view matched against
+many stored views in one pass (not in the paper).
+
+`extract_bands` + `match_bands` spend most of their time in numpy call overhead: a few dozen small array
+operations per band and per pair. Here every band of an image is handled by the same calls, and every stored view
+of a query by the same calls, so the cost per band and per pair is the arithmetic alone:
+
+- `extract_packed(image, row, params)` -> `PackedBands`: the `params.bands` bands around `row`, at most
+  `params.max_features` features each (the strongest), as (bands, K) arrays padded with invalid slots. Per image:
+  done once when a view is stored or queried.
+- `stack_packed([...])` -> `PackedSet`: stored views side by side, laid out for one matrix product per band. Per
+  stored view: done once when the database is built.
+- `match_packed(test, stored_set, params, which=None)` -> scores of the test view against each stored view (or
+  the subset `which`). Per pair.
+
+The results are those of `extract_bands` / `match_bands` with the same parameters and `Consensus.SHIFT` (the
+tests check it on real frames); the RANSAC line has no batched form here. Requires `params.max_features` > 0.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from loops.horizon.bands import band_rows
+from loops.horizon.matching import shift_bins
+from loops.horizon.params import Consensus, HorizonParams, SampleMode
+from loops.horizon.signal import HorizonError, HorizonLine, as_gray
+from loops.horizon.surf1d import RESP_COEF, SIGN_WEIGHT, min_signal_length, signal_plan
+
+
+@dataclass(frozen=True)
+class PackedBands:
+    """1D SURF features of every band of one view, at most K per band (empty slots have valid False).
+
+    x: (B, K) image column of each feature. keys: (B, K, D + 1) float32, the descriptor (unit length) and its sign
+    times SIGN_WEIGHT (surf1d's matching keys), all 0 in an empty slot. With unit descriptors and SIGN_WEIGHT 2 a
+    same-sign pair has similarity in [3, 5], an opposite-sign pair in [-5, -3] and an empty slot 0: the nearest
+    stored feature is the largest similarity, and it is a match only when positive.
+    width: image columns.
+    """
+
+    x: np.ndarray
+    keys: np.ndarray
+    valid: np.ndarray
+    width: int
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Features per band."""
+        return self.valid.sum(axis=1)
+
+    def __len__(self) -> int:
+        """Features over all bands."""
+        return int(self.valid.sum())
+
+
+@dataclass(frozen=True)
+class PackedSet:
+    """P stored views side by side: keys (B, D + 1, K, P) for the similarity product, x (B, K, P), enough (B, P):
+    the band holds at least two features (a nearest and a second nearest exist)."""
+
+    keys: np.ndarray
+    x: np.ndarray
+    enough: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.x.shape[2])
+
+
+@dataclass(frozen=True)
+class PackedScores:
+    """Scores of one test view against P stored views: NN and consensus sums over the bands, (P,) each."""
+
+    score: np.ndarray
+    score_ransac: np.ndarray
+    matches: list["PackedMatch"] | None = None    # with details=True: each view's consensus matches
+
+
+@dataclass(frozen=True)
+class PackedMatch:
+    """One (test, stored) pair of the packed path: the scores, the shift line (b_s = 1, b_d = the mean shift of
+    the consensus matches; NaN when no band has a consensus) and the consensus matches as image columns."""
+
+    score: float
+    score_ransac: float
+    b_s: float
+    b_d: float
+    x_test: np.ndarray      # (M,) column of each consensus match in the test view
+    x_stored: np.ndarray    # (M,) and in the stored view
+    band: np.ndarray        # (M,) its band
+
+    @property
+    def n_inliers(self) -> int:
+        return int(self.x_test.shape[0])
+
+
+def uses_packed(params: HorizonParams) -> bool:
+    """Whether the landmark memory, the recogniser and `vslam horizon` score through this module with `params`
+    (preset `fast` does): a fixed number of slots per band, shift consensus, the sign test, no one-to-one."""
+    return (params.max_features > 0 and params.consensus is Consensus.SHIFT and params.match_sign
+            and not params.one_to_one)
+
+
+def level_row(horizon: float | HorizonLine) -> float:
+    """The row of a level horizon; the packed path reads bands of whole rows, so a tilted line is refused."""
+    if isinstance(horizon, HorizonLine):
+        if horizon.row_left != horizon.row_right:
+            raise HorizonError(f"horizon line {horizon.row_left:g}:{horizon.row_right:g}: the packed path (preset "
+                               "fast) needs a level horizon (one row)")
+        horizon = horizon.row_left
+    try:
+        row = float(horizon)
+    except (TypeError, ValueError):
+        raise HorizonError(f"horizon row must be a number, got {horizon!r}") from None
+    if not np.isfinite(row):
+        raise HorizonError(f"horizon row must be finite, got {row}")
+    return row
+
+
+@dataclass(frozen=True)
+class _BandPlan:
+    rows: np.ndarray | None     # (B * band_height,) image rows band after band; None when they are one slice
+    r0: int                     # first row of that slice
+    ext_cols: np.ndarray        # (L,) column of the band sums feeding each padded-integral input (W: zero column)
+    resp_flat: np.ndarray       # (B, 4, M) flat look-ups into the (B, L) integral, candidates of the kept levels
+    resp_w: np.ndarray          # (M,)
+    desc_flat: np.ndarray       # (B, M, S + 2) flat look-ups of each candidate's descriptor samples
+    desc_haar: np.ndarray       # surf1d's descriptor matrices (SignalPlan.desc_haar, .desc_abs)
+    desc_abs: np.ndarray
+    x: np.ndarray               # (M,) image column of each candidate
+    n: int
+
+
+@functools.lru_cache(maxsize=64)
+def _band_plan(height: int, width: int, row: float, params: HorizonParams) -> _BandPlan:
+    n = width // params.step if params.sample_mode is SampleMode.BOX else -(-width // params.step)
+    if n < min_signal_length(params):
+        raise HorizonError(f"horizon signal too short: {n} samples (image width {width} / step {params.step}); "
+                           f"1D SURF needs at least {min_signal_length(params)}")
+    band = params.band_height
+    starts = []
+    for r in band_rows(row, height, params):
+        r0 = int(np.floor(r + 0.5)) - band // 2
+        if r0 < 0 or r0 + band > height:
+            raise HorizonError(f"horizon row {row:g}: a {band}-pixel band needs rows {r0}..{r0 + band - 1}, but "
+                               f"the image has rows 0..{height - 1}")
+        starts.append(r0)
+    rows = (np.array(starts)[:, None] + np.arange(band)).ravel()
+    contiguous = bool(np.all(np.diff(rows) == 1))
+    plan = signal_plan(n, params)
+    # Levels whose filter never fits the signal give zero responses everywhere: skip them (each kept level keeps
+    # all its candidates, so its first and last still separate it from its neighbours in the flat vector).
+    used = np.unique(plan.cand_level[plan.resp_weight > 0])
+    keep = np.flatnonzero(np.isin(plan.cand_level, used))
+    resp_idx, desc_idx = plan.resp_idx[:, keep], plan.desc_idx[keep]
+    # The padding the kept levels reach (the 1D plan pads for the largest level). Fewer replicated samples shift
+    # every integral value by the same multiple of the first sample; responses and Haar sums are differences
+    # with coefficients summing to 0, so they do not change.
+    lo, hi = min(resp_idx.min(), desc_idx.min()), max(resp_idx.max(), desc_idx.max())
+    pad = max(plan.pad - int(lo), int(hi) - plan.pad - n, 1)
+    delta = plan.pad - pad
+    length = n + 2 * pad + 1
+    sample_col = np.arange(n) * (1 if params.sample_mode is SampleMode.BOX else params.step)
+    src = n if params.sample_mode is SampleMode.BOX else width
+    ext_cols = np.concatenate([[src], np.full(pad, sample_col[0]), sample_col, np.full(pad, sample_col[-1])])
+    band_start = (np.arange(params.bands) * length)[:, None, None]
+    out = _BandPlan(None if contiguous else rows, starts[0], ext_cols.astype(np.intp),
+                    (resp_idx - delta)[None] + band_start, plan.resp_weight[keep], (desc_idx - delta)[None] + band_start,
+                    plan.desc_haar, plan.desc_abs, plan.columns[plan.cand_pos[keep]], n)
+    for a in (rows, out.ext_cols, out.resp_flat, out.resp_w, out.desc_flat, out.x):
+        a.setflags(write=False)
+    return out
+
+
+def _band_sums(image: np.ndarray, bp: _BandPlan, params: HorizonParams) -> np.ndarray:
+    """(B, W + 1) column sums of each band (column W is 0), or (B, n + 1) box sums in SampleMode.BOX."""
+    n_bands, band = params.bands, params.band_height
+    px = image[bp.r0:bp.r0 + n_bands * band] if bp.rows is None else image[bp.rows]
+    # Integer sums are exact; uint16 holds a band of up to 257 rows of uint8 and is the fastest to accumulate.
+    acc = (np.uint16 if image.dtype == np.uint8 and band * 255 < 2 ** 16 else
+           np.int64 if image.dtype.kind in "ui" else np.float64)
+    if params.sample_mode is SampleMode.BOX:
+        sums = np.zeros((n_bands, bp.n + 1), acc)
+        sums[:, :bp.n] = px[:, :bp.n * params.step].reshape(n_bands, band, bp.n, params.step).sum(axis=(1, 3),
+                                                                                                    dtype=acc)
+        return sums
+    width = image.shape[1]
+    sums = np.zeros((n_bands, width + 1), acc)
+    np.add.reduce(px.reshape(n_bands, band, width), axis=1, dtype=acc, out=sums[:, :width])
+    return sums
+
+
+def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonParams) -> PackedBands:
+    """Features of the `params.bands` bands around horizon `row` (a level HorizonLine is accepted), the
+    `params.max_features` strongest per band."""
+    k_max = params.max_features
+    if k_max <= 0:
+        raise HorizonError("the packed path needs max_features > 0 (a fixed number of slots per band)")
+    image = as_gray(np.asarray(image))
+    height, width = image.shape
+    row = level_row(row)
+    if not 0 <= row <= height - 1:     # bands are moved inside the image at its edges, a horizon is not
+        raise HorizonError(f"horizon row {row:g} is outside the image (rows 0..{height - 1})")
+    bp = _band_plan(height, width, row, params)
+    n_bands = params.bands
+    # Padded integral of each band's signal, as surf1d's (edge samples replicated, a leading 0).
+    integral = np.cumsum(_band_sums(image, bp, params)[:, bp.ext_cols], axis=1, dtype=np.float64)
+    r = np.matmul(RESP_COEF, integral.ravel().take(bp.resp_flat))   # (B, M)
+    r *= bp.resp_w
+    a = np.abs(r)
+    c = a[:, 1:-1]
+    bi, ci = np.nonzero((c > np.maximum(a[:, :-2], params.threshold)) & (c >= a[:, 2:]))   # band, then position
+    # The k_max strongest of each band (ties: the first position, as surf1d), into slots 0.. in that order.
+    val = c[bi, ci]
+    order = np.argsort(bi * (2.0 * val.max(initial=0.0) + 1.0) - val, kind="stable")
+    bi, ci = bi[order], ci[order]
+    counts = np.bincount(bi, minlength=n_bands)
+    slot = np.arange(bi.size) - (np.cumsum(counts) - counts)[bi]
+    keep = slot < k_max
+    bi, slot, cand = bi[keep], slot[keep], ci[keep] + 1
+    # Descriptors as surf1d.detect_and_describe: integral look-ups -> Haar responses and subregion sums.
+    out = integral.ravel()[bp.desc_flat[bi, cand]] @ bp.desc_haar
+    n_s = bp.desc_abs.shape[0]
+    desc = np.abs(out[:, :n_s]) @ bp.desc_abs
+    desc += out[:, n_s:]
+    desc /= np.sqrt(np.einsum("kd,kd->k", desc, desc) + 1e-24)[:, None]
+    d = desc.shape[1]
+    keys = np.zeros((n_bands, k_max, d + 1), np.float32)
+    keys[bi, slot, :d] = desc
+    keys[bi, slot, d] = np.where(r[bi, cand] > 0, SIGN_WEIGHT, -SIGN_WEIGHT)   # never 0: |r| > threshold >= 0
+    valid = np.zeros((n_bands, k_max), bool)
+    valid[bi, slot] = True
+    x = np.zeros((n_bands, k_max))
+    x[bi, slot] = bp.x[cand]
+    return PackedBands(x, keys, valid, width)
+
+
+def stack_packed(views: list[PackedBands]) -> PackedSet:
+    """Stored views side by side (all from the same bands and max_features)."""
+    if not views:
+        raise HorizonError("no views to stack")
+    shapes = {v.keys.shape for v in views}
+    if len(shapes) > 1:
+        raise HorizonError(f"views of different bands / max_features cannot be stacked: key shapes {sorted(shapes)}")
+    keys = np.ascontiguousarray(np.stack([v.keys for v in views], axis=3).transpose(0, 2, 1, 3))   # (B, D2, K, P)
+    valid = np.stack([v.valid for v in views], axis=2)                  # (B, K, P)
+    x = np.stack([v.x for v in views], axis=2)
+    return PackedSet(keys, x, valid.sum(axis=1) >= 2)
+
+
+def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
+                 which: np.ndarray | None = None, details: bool = False) -> PackedScores:
+    """Scores of `test` against every stored view (or the views `which`), as match_bands with Consensus.SHIFT;
+    with `details`, also each view's consensus matches (PackedScores.matches, a PackedMatch per view).
+
+    Per band: all test features against all stored slots in one product; nearest and second nearest; the ratio
+    and sign tests; weights 1 / max(distance, min_distance); NN score = their sum; consensus = the heaviest window
+    of two adjacent ransac_tolerance bins of x_test - x_stored holding at least ransac_min_inliers matches.
+    """
+    if params.consensus is not Consensus.SHIFT or not params.match_sign or params.one_to_one:
+        raise HorizonError("the packed path matches with consensus 'shift', match_sign true, one_to_one false")
+    keys, xs, enough = stored.keys, stored.x, stored.enough
+    if which is not None:
+        which = np.asarray(which, np.intp)
+        keys, xs, enough = keys[..., which], xs[..., which], enough[:, which]
+    b, d2, ks, p = keys.shape
+    kt = test.keys.shape[1]
+    if test.keys.shape != (b, ks, d2):
+        raise HorizonError(f"test view of key shape {test.keys.shape} against stored views of {(b, ks, d2)}: "
+                           "they come from different bands / max_features")
+    if p == 0:
+        return PackedScores(np.zeros(0), np.zeros(0), [] if details else None)
+    sim = np.matmul(test.keys, keys.reshape(b, d2, ks * p))              # (B, Kt, Ks * P)
+    # Nearest and second nearest slot in two max passes over a copy whose low mantissa bits carry the slot index;
+    # their exact similarities are then read from sim. Non-negative floats order as their int32 bit patterns, and
+    # every negative one (opposite sign) is below them: the nearest is right whenever it is a match (> 0), and a
+    # wrong second nearest is then <= 0, where the ratio test passes as it does with the true one (d1 <= 4,
+    # d2 >= 10).
+    bits = max(1, (ks - 1).bit_length())
+    low = (1 << bits) - 1
+    row, x_row, h_row = _match_index(b, kt, ks, p)
+    si = np.bitwise_and(sim.view(np.int32), np.int32(~low)).reshape(b, kt, ks, p)
+    si |= np.arange(ks, dtype=np.int32)[:, None]
+    j1 = si.max(axis=2)
+    j1 &= low                                                            # (B, Kt, P)
+    at1 = row + j1 * p
+    flat_si = si.ravel()
+    flat_si[at1] = np.iinfo(np.int32).min
+    j2 = si.max(axis=2)
+    j2 &= low
+    flat_sim = sim.ravel()
+    s1 = flat_sim[at1]
+    d1 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * s1                         # squared descriptor distances
+    d2 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * flat_sim[row + j2 * p]
+    ok = d1 < (params.ratio ** 2) * d2
+    ok &= s1 > 0.0
+    ok &= test.valid[:, :, None] & enough[:, None, :]
+    w = ok / np.sqrt(np.maximum(d1, params.min_distance ** 2))          # 1 / max(distance, min_distance), or 0
+    nn = w.sum(axis=(0, 1))
+    if not ok.any():
+        return PackedScores(nn, np.zeros(p), [_no_consensus(nn[v]) for v in range(p)] if details else None)
+    # The shift histogram of every (band, view) in one bincount; each match adds its weight plus `unit`, so a
+    # window's count and weight come out of the same sum (weights of one band sum to less than unit).
+    bins = shift_bins(test.x[:, :, None] - xs.ravel()[x_row + j1 * p], params)
+    matched = bins[ok]
+    lo = int(matched.min())
+    n_bins = int(matched.max()) - lo + 2
+    bins -= lo
+    np.clip(bins, 0, n_bins - 1, out=bins)                               # unmatched: any bin, they add 0
+    unit = 2.0 ** np.ceil(np.log2(kt / params.min_distance + 1.0))
+    w_count = w + unit * ok
+    h = np.bincount((h_row * n_bins + bins).ravel(), weights=w_count.ravel(), minlength=b * p * n_bins)
+    h = h.reshape(b, p, n_bins)
+    hw = h[..., :-1] + h[..., 1:]
+    count = np.floor(hw / unit)
+    hw -= unit * count
+    hw[count < params.ransac_min_inliers] = 0.0
+    consensus = hw.max(axis=2).sum(axis=0)
+    if not details:
+        return PackedScores(nn, consensus)
+    # The consensus matches: those in each (band, view)'s heaviest window, when it qualified.
+    k = hw.argmax(axis=2)                                                # (B, P)
+    k = np.where(hw.max(axis=2) > 0, k, -2)[:, None, :]                  # -2: no window (no bin is -2 or -1)
+    inl = ok & ((bins == k) | (bins == k + 1))                           # (B, Kt, P)
+    x_test = np.broadcast_to(test.x[:, :, None], inl.shape)
+    x_stored = xs.ravel()[x_row + j1 * p]
+    band = np.broadcast_to(np.arange(b)[:, None, None], inl.shape)
+    out = []
+    for v in range(p):
+        m = inl[..., v]
+        xt, xv = x_test[..., v][m], x_stored[..., v][m]
+        b_d = float(np.mean(xt - xv)) if m.any() else float("nan")
+        out.append(PackedMatch(float(nn[v]), float(consensus[v]), 1.0 if m.any() else float("nan"), b_d, xt, xv,
+                               band[..., v][m]))
+    return PackedScores(nn, consensus, out)
+
+
+def _no_consensus(score: float) -> PackedMatch:
+    none = np.zeros(0)
+    return PackedMatch(float(score), 0.0, float("nan"), float("nan"), none, none, np.zeros(0, np.intp))
+
+
+@functools.lru_cache(maxsize=64)
+def _match_index(b: int, kt: int, ks: int, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat indices of slot 0 of each (band, test slot, view) in the (B, Kt, Ks, P) similarities, of each (band,
+    view) in the (B, Ks, P) stored columns and in the (B, P, bins) histogram (times its bin count)."""
+    row = np.arange(b * kt).reshape(b, kt, 1) * (ks * p) + np.arange(p)
+    x_row = np.arange(b).reshape(b, 1, 1) * (ks * p) + np.arange(p)
+    h_row = np.arange(b).reshape(b, 1, 1) * p + np.arange(p)
+    for a in (row, x_row, h_row):
+        a.setflags(write=False)
+    return row, x_row, h_row

@@ -1,0 +1,154 @@
+"""Packed multi-band 1D SURF (loops.horizon.packed): the same features and scores as extract_bands / match_bands
+with the same parameters, on synthetic scenes and on real frames; the shift consensus; bad input."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from loops.horizon import HorizonError, HorizonParams, extract_bands, match, match_bands
+from loops.horizon.matching import shift_consensus
+from loops.horizon.packed import extract_packed, match_packed, stack_packed
+from loops.horizon.surf1d import HorizonFeatures
+from tests.loops.test_horizon_bands import scene
+
+FAST = HorizonParams.preset("fast")
+
+
+def same_features(packed, reference: list[HorizonFeatures]) -> None:
+    assert packed.x.shape[0] == len(reference)
+    for k, f in enumerate(reference):
+        v = packed.valid[k]
+        assert v.sum() == len(f)
+        # Order by column, then by the first descriptor number (two levels can share a column).
+        order = np.lexsort((packed.keys[k][v][:, 0], packed.x[k][v]))
+        ref_order = np.lexsort((f.descriptor[:, 0], f.x))
+        np.testing.assert_array_equal(packed.x[k][v][order], f.x[ref_order])
+        keys = packed.keys[k][v][order]
+        np.testing.assert_allclose(keys[:, :-1], f.descriptor[ref_order], atol=1e-6)
+        np.testing.assert_array_equal(np.sign(keys[:, -1]), f.sign[ref_order])
+        assert not packed.keys[k][~v].any()      # empty slots are all zero
+
+
+def reference_scores(test_img, stored_imgs, row, p):
+    t = extract_bands(test_img, row, p)
+    out = [match_bands(t, extract_bands(s, row, p), p) for s in stored_imgs]
+    return np.array([m.score for m in out]), np.array([m.score_ransac for m in out])
+
+
+def test_the_cap_keeps_the_strongest_features_of_each_band():
+    img = scene(3)
+    full = extract_bands(img, 60.0, FAST.replace(max_features=0))
+    capped = extract_bands(img, 60.0, FAST)
+    for f, c in zip(full, capped):
+        assert len(f) > FAST.max_features            # the scene has more: the cap acts
+        assert len(c) == FAST.max_features
+        strongest = np.sort(np.argsort(-np.abs(f.response), kind="stable")[:FAST.max_features])
+        np.testing.assert_array_equal(c.x, f.x[strongest])
+
+
+@pytest.mark.parametrize("row", [60.0, 30.0, 100.0])   # centred, and bands pushed inside the image at either edge
+def test_packed_extraction_gives_the_reference_features(row):
+    for seed in range(3):
+        img = scene(seed)
+        same_features(extract_packed(img, row, FAST), extract_bands(img, row, FAST))
+
+
+def test_overlapping_bands_of_a_low_image_give_the_reference_features():
+    img = scene(2)[:40]                            # seven 12-row bands overlap inside 40 rows
+    same_features(extract_packed(img, 20.0, FAST), extract_bands(img, 20.0, FAST))
+
+
+def test_packed_box_sampling_and_colour_input_give_the_reference_features():
+    p = FAST.replace(sample_mode="box", step=3)
+    img = cv2.cvtColor(scene(4), cv2.COLOR_GRAY2BGR)
+    same_features(extract_packed(img, 60.0, p), extract_bands(img, 60.0, p))
+
+
+def test_packed_matching_gives_the_reference_scores_for_one_view_a_subset_and_all():
+    stored_imgs = [scene(s, shift=4.0) for s in range(5)] + [scene(s + 50) for s in range(3)]
+    test_img = scene(2)
+    ref_nn, ref_cons = reference_scores(test_img, stored_imgs, 60.0, FAST)
+    db = stack_packed([extract_packed(s, 60.0, FAST) for s in stored_imgs])
+    t = extract_packed(test_img, 60.0, FAST)
+    every = match_packed(t, db, FAST)
+    np.testing.assert_allclose(every.score, ref_nn, rtol=1e-5)
+    np.testing.assert_allclose(every.score_ransac, ref_cons, rtol=1e-5)
+    which = np.array([6, 2, 2])
+    sub = match_packed(t, db, FAST, which)
+    np.testing.assert_allclose(sub.score_ransac, ref_cons[which], rtol=1e-5)
+    # The same place (shifted 4 px) scores above every other place.
+    assert ref_cons[2] > np.delete(ref_cons, 2).max()
+
+
+def test_packed_matching_with_the_geometric_check_off_and_one_view_of_few_features():
+    flat = np.full((120, 160), 128, np.uint8)            # no features at all: every slot empty
+    stored_imgs = [scene(1), flat]
+    p = FAST.replace(ransac_min_inliers=5, ratio=0.8)
+    ref_nn, ref_cons = reference_scores(scene(1, shift=3.0), stored_imgs, 60.0, p)
+    db = stack_packed([extract_packed(s, 60.0, p) for s in stored_imgs])
+    got = match_packed(extract_packed(scene(1, shift=3.0), 60.0, p), db, p)
+    np.testing.assert_allclose(got.score, ref_nn, rtol=1e-5)
+    np.testing.assert_allclose(got.score_ransac, ref_cons, rtol=1e-5)
+    assert got.score[1] == 0 and got.score_ransac[1] == 0
+    assert got.score_ransac[0] > 0
+
+
+def test_real_frames_give_the_reference_features_and_scores(shared_data):
+    c = shared_data / "places" / "corridor"
+    names = ["ref/0000010.jpg", "ref/0000050.jpg", "query/0000010.jpg", "query/0000011.jpg", "query/0000090.jpg"]
+    imgs = [cv2.imread(str(c / n), cv2.IMREAD_GRAYSCALE) for n in names]
+    if any(i is None for i in imgs):
+        pytest.skip("corridor frames not readable")
+    kitti = cv2.imread(str(shared_data / "pairs" / "images" / "kitti06-12.png"), cv2.IMREAD_GRAYSCALE)
+    if kitti is not None:
+        same_features(extract_packed(kitti, 183.0, FAST), extract_bands(kitti, 183.0, FAST))
+    packed = [extract_packed(i, 60.0, FAST) for i in imgs]
+    for pk, img in zip(packed, imgs):
+        same_features(pk, extract_bands(img, 60.0, FAST))
+    ref_nn, ref_cons = reference_scores(imgs[0], imgs[2:], 60.0, FAST)
+    got = match_packed(packed[0], stack_packed(packed[2:]), FAST)
+    np.testing.assert_allclose(got.score, ref_nn, rtol=1e-5)
+    np.testing.assert_allclose(got.score_ransac, ref_cons, rtol=1e-5)
+    # Reference place 10 is query place 10 or 11 (the traverses are aligned), not query place 90.
+    assert min(got.score_ransac[:2]) > got.score_ransac[2]
+
+
+def test_shift_consensus_takes_the_heaviest_window_with_enough_matches():
+    p = HorizonParams(ransac_tolerance=8.0, ransac_min_inliers=2)
+    shift = np.array([0.0, 3.0, 7.0, 40.0, 41.0, -60.0])
+    w = np.array([1.0, 1.0, 1.0, 5.0, 5.0, 50.0])
+    score, b_d, inl = shift_consensus(shift, w, p)
+    assert score == 10.0                              # 40 and 41; the single -60 has too few matches
+    np.testing.assert_array_equal(inl, [False, False, False, True, True, False])
+    assert b_d == 40.5
+    assert shift_consensus(shift[:2], w[:2], p.replace(ransac_min_inliers=3))[0] == 0.0
+
+
+def test_shift_consensus_in_match_reports_the_turn():
+    p = FAST.replace(bands=1)
+    a, b = scene(5), scene(5, shift=10.0)
+    r = match(extract_bands(b, 60.0, p)[0], extract_bands(a, 60.0, p)[0], p)
+    assert r.b_s == 1.0
+    assert r.b_d == pytest.approx(10.0, abs=p.ransac_tolerance)
+    assert r.n_inliers >= p.ransac_min_inliers
+
+
+def test_bad_input_raises_horizon_errors():
+    img = scene(0)
+    with pytest.raises(HorizonError, match="max_features"):
+        extract_packed(img, 60.0, FAST.replace(max_features=0))
+    with pytest.raises(HorizonError, match="too short"):
+        extract_packed(img[:, :20], 60.0, FAST)
+    with pytest.raises(HorizonError, match="rows"):
+        extract_packed(img[:8], 4.0, FAST)         # not even one 12-row band fits
+    with pytest.raises(HorizonError, match="cannot be stacked"):
+        stack_packed([extract_packed(img, 60.0, FAST), extract_packed(img, 60.0, FAST.replace(max_features=8))])
+    with pytest.raises(HorizonError, match="no views"):
+        stack_packed([])
+    db = stack_packed([extract_packed(img, 60.0, FAST)])
+    with pytest.raises(HorizonError, match="shift"):
+        match_packed(extract_packed(img, 60.0, FAST), db, FAST.replace(consensus="ransac"))
+    with pytest.raises(HorizonError, match="different bands"):
+        match_packed(extract_packed(img, 60.0, FAST.replace(max_features=8)), db, FAST)
+    assert match_packed(extract_packed(img, 60.0, FAST), db, FAST, which=np.zeros(0, int)).score.shape == (0,)

@@ -1,0 +1,159 @@
+"""Packed 1D SURF (`loops.horizon.packed`, preset `fast`) against full-image ORB + RANSAC, accuracy and time, on
+the same frames in the same run.
+
+How the time is compared (both methods, same images, same pairs, same process, one thread each: OpenCV
+single-threaded, BLAS single-threaded by the CLI; thread CPU time, so that time spent waiting for other
+processes on a shared machine does not count; the two methods take turns every 16 images / 16 test views, so that
+a change of load hits both, while each runs its own loop as it would in use):
+
+- per image: one extraction call (a frame as it arrives), median over the images.
+- per pair, matching: median over the pairs. ORB matches one pair per call (its cost does not depend on the
+  others). The packed method matches a test view against all its stored candidates of the bank in one call; each
+  pair is charged the call's time / candidates.
+- per pair, query against every stored view: the packed method matches a test view against all stored views of
+  the bank in one call (what a place recogniser does); time / stored views, median over the test views. ORB: the
+  same as its pair matching.
+- per pair, strict: 2 extractions + 1 matching (each pair pays both its images' extraction).
+- per pair, every test view against every stored view: matching against every stored view + (extraction x
+  (test views + stored views) + stacking x stored views) / (test views x stored views): each image extracted
+  once; stacking = the packed method's building of the stored set (per stored view, once; ORB has none).
+"""
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from loops.curves import auc
+from loops.horizon import HorizonParams
+from loops.horizon.packed import extract_packed, match_packed, stack_packed
+from vslam.bench.horizon_real import OrbRansac
+from vslam.evaluation.tables import format_table
+
+ORB = "ORB(1000) + RANSAC, native size"
+BLOCK = 16   # images or test views per block: the methods take turns block by block
+
+
+@dataclass
+class PairSet:
+    """Images (name -> grey array), their horizon rows, pairs (stored, test) with labels, and a half per pair
+    (0 tuning, 1 reporting; one half only for a set nothing was tuned on)."""
+
+    images: dict[str, np.ndarray]
+    rows: dict[str, float]
+    pairs: list[tuple[str, str]]
+    labels: np.ndarray
+    half: np.ndarray
+
+
+@dataclass
+class _Measured:
+    scores: dict[str, np.ndarray]                  # method -> (P,) score
+    ext_us: dict[str, dict[str, float]]            # method -> image -> extraction us
+    match_us: dict[str, np.ndarray]                # method -> (P,) matching us charged to each pair
+    all_us: dict[str, float]                       # test image -> packed us / pair against every stored view
+    stack_us: float                                # packed: building the stored set, us per stored view
+
+
+def fast_name(params: HorizonParams) -> str:
+    return (f"1D SURF packed, preset fast ({params.bands} bands, {params.max_features} features / band, "
+            f"shift consensus)")
+
+
+def _blocks(items: list, size: int = BLOCK) -> list[list]:
+    return [items[i:i + size] for i in range(0, len(items), size)]
+
+
+def _measure(ps: PairSet, params: HorizonParams) -> _Measured:
+    cv2.setNumThreads(1)
+    clock = time.thread_time_ns
+    orb = OrbRansac()
+    fast = fast_name(params)
+    feats: dict[str, dict] = {ORB: {}, fast: {}}
+    ext: dict[str, dict[str, float]] = {ORB: {}, fast: {}}
+    extractors = {ORB: lambda im, row: orb.extract(im), fast: lambda im, row: extract_packed(im, row, params)}
+    for i, block in enumerate(_blocks(list(ps.images))):
+        for method in ((ORB, fast) if i % 2 else (fast, ORB)):
+            for name in block:
+                t0 = clock()
+                feats[method][name] = extractors[method](ps.images[name], ps.rows[name])
+                ext[method][name] = (clock() - t0) / 1e3
+    stored_names = sorted({a for a, _ in ps.pairs})
+    col = {n: i for i, n in enumerate(stored_names)}
+    t0 = clock()
+    db = stack_packed([feats[fast][n] for n in stored_names])
+    stack_us = (clock() - t0) / 1e3 / len(stored_names)
+    groups: dict[str, list[int]] = defaultdict(list)
+    for p, (_, b) in enumerate(ps.pairs):
+        groups[b].append(p)
+    n = len(ps.pairs)
+    scores = {ORB: np.zeros(n), fast: np.zeros(n)}
+    match_us = {ORB: np.zeros(n), fast: np.zeros(n)}
+    all_us: dict[str, float] = {}
+
+    def packed(block: list[str]) -> None:
+        for b in block:
+            idx = groups[b]
+            which = np.array([col[ps.pairs[p][0]] for p in idx])
+            t0 = clock()
+            r = match_packed(feats[fast][b], db, params, which)
+            t = (clock() - t0) / 1e3
+            scores[fast][idx] = r.score_ransac
+            match_us[fast][idx] = t / len(idx)
+            t0 = clock()
+            match_packed(feats[fast][b], db, params)
+            all_us[b] = (clock() - t0) / 1e3 / len(stored_names)
+
+    def orb_pairs(block: list[str]) -> None:
+        for b in block:
+            for p in groups[b]:
+                t0 = clock()
+                scores[ORB][p] = orb.match(feats[ORB][b], feats[ORB][ps.pairs[p][0]])
+                match_us[ORB][p] = (clock() - t0) / 1e3
+
+    for i, block in enumerate(_blocks(list(groups))):
+        for run in ((orb_pairs, packed) if i % 2 else (packed, orb_pairs)):
+            run(block)
+    return _Measured(scores, ext, match_us, all_us, stack_us)
+
+
+def _half_figures(ps: PairSet, m: _Measured, method: str, sel: np.ndarray) -> dict:
+    pairs = [ps.pairs[p] for p in np.flatnonzero(sel)]
+    stored, tests = sorted({a for a, _ in pairs}), sorted({b for _, b in pairs})
+    ext = float(np.median([m.ext_us[method][k] for k in sorted(set(stored) | set(tests))]))
+    match = float(np.median(m.match_us[method][sel]))
+    every = match if method == ORB else float(np.median([m.all_us[b] for b in tests]))
+    stack = 0.0 if method == ORB else m.stack_us
+    y = ps.labels[sel]
+    return {"auc": auc(m.scores[method][sel], y), "pairs": int(sel.sum()), "test_views": len(tests),
+            "stored_views": len(stored), "extraction_us": ext, "matching_us": match, "matching_every_us": every,
+            "strict_us": 2 * ext + match,
+            "stacking_us": stack,
+            "every_pair_us": every + (ext * (len(tests) + len(stored)) + stack * len(stored)) / (len(tests) * len(stored))}
+
+
+def compare(ps: PairSet, params: HorizonParams, halves: dict[str, int | None]) -> tuple[str, dict]:
+    """Table of AUC and per-image / per-pair times of both methods on each half (name -> half id, None = all)."""
+    m = _measure(ps, params)
+    fast = fast_name(params)
+    res: dict[str, dict] = {}
+    rows, ratio_rows = [], []
+    cols = ("extraction_us", "matching_us", "matching_every_us", "strict_us", "every_pair_us")
+    for half_name, h in halves.items():
+        sel = np.ones(len(ps.pairs), bool) if h is None else ps.half == h
+        res[half_name] = {meth: _half_figures(ps, m, meth, sel) for meth in (fast, ORB)}
+        o, f = res[half_name][ORB], res[half_name][fast]
+        for meth in (fast, ORB):
+            r = res[half_name][meth]
+            rows.append([half_name, meth, r["pairs"], r["auc"], *(r[c] for c in cols)])
+        ratio_rows.append([half_name, f["auc"] - o["auc"], *(o[c] / f[c] for c in cols)])
+        res[half_name]["orb_over_packed"] = {c: o[c] / f[c] for c in cols}
+    names = ["extraction / image", "matching / pair (its candidates)", "matching / pair (against every stored view)",
+             "per pair, strict (2 extractions + matching)", "per pair, every test x every stored view"]
+    table = format_table(["half", "method", "pairs", "AUC", *(f"{n}, us" for n in names)], rows, floatfmt=".3g")
+    ratios = format_table(["half", "AUC, packed - ORB", *(f"ORB / packed, {n}" for n in names)], ratio_rows,
+                          floatfmt=".3g")
+    return f"{table}\n\n{ratios}", res
