@@ -176,12 +176,15 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     iters += it
     trial = ~cand & ~inlier
     if trial.sum() > params.trial_max_loops:
-        # the ones nearest to their threshold at the solution: a lone true loop closing a long drift misses it by a
-        # few times (manhattan: r^2 18 against 3.3, 0.002 once kept); a random false loop by orders of magnitude,
-        # and long-range false loops in every inner solve cost minutes on 10^4-node graphs (fill-in)
+        # the ones nearest to their threshold at the solution, within `readmit_factor` of it: a lone true loop
+        # closing a long drift misses it by a few times (manhattan: r^2 18 against 3.3, 0.002 once kept); a random
+        # false loop by orders of magnitude, and long-range false loops in every inner solve cost minutes on
+        # 10^4-node graphs (fill-in). With few unsupported loops all are tried (ring: 8 m of drift)
         ratio = np.where(trial, squared_residuals(built.loops, values) / c2, np.inf)
+        ratio[ratio > params.readmit_factor] = np.inf
         trial = np.zeros(L, bool)
         trial[np.argsort(ratio, kind="stable")[:params.trial_max_loops]] = True
+        trial &= np.isfinite(ratio)
     if trial.any():
         # judged by a GNC that includes them, so the map can move to them; a test at a solution without them
         # would see the drift as their residual
