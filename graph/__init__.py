@@ -25,12 +25,24 @@ from graph.incremental import IncrementalPoseGraph
 from graph.model import PoseGraphData, classify_edges
 from graph.optimizer import optimize
 from graph.outliers import LoopScores, inject_false_loops, loop_scores
-from graph.params import GncImpl, GncLoss, GraphParams, InitMethod, LoopWeighting, RobustMode, Solver
+from graph.params import (
+                           GncImpl,
+                           GncLoss,
+                           GraphParams,
+                           IncrementalParams,
+                           InitMethod,
+                           LoopWeighting,
+                           RobustMode,
+                           RobustParams,
+                           Solver,
+                           SolverParams,
+)
 from graph.pose_graph import PoseGraph
 from graph.result import GraphResult, write_g2o, write_tum
 from graph.robust_graph import RobustPoseGraph
 
-__all__ = ["GncImpl", "GncLoss", "GraphFormatError", "GraphParams", "GraphResult", "IncrementalPoseGraph",
-           "InitMethod", "LoopScores", "LoopWeighting", "PoseGraph", "PoseGraphData", "RobustMode", "RobustPoseGraph", "Solver",
+__all__ = ["GncImpl", "GncLoss", "GraphFormatError", "GraphParams", "GraphResult", "IncrementalParams",
+           "IncrementalPoseGraph", "InitMethod", "LoopScores", "LoopWeighting", "PoseGraph", "PoseGraphData",
+           "RobustMode", "RobustParams", "RobustPoseGraph", "Solver", "SolverParams",
            "classify_edges", "format_g2o", "format_toro", "inject_false_loops", "loop_scores", "optimize",
            "read_g2o", "read_graph", "read_toro", "write_g2o", "write_graph", "write_toro", "write_tum"]

@@ -41,9 +41,9 @@ from graph.thresholds import fence_scale, information_scale, loop_thresholds
 
 def resolve_init(data: PoseGraphData, params: GraphParams) -> InitMethod:
     """AUTO: LAGO (2D) / chordal (3D) for least squares; the odometry tree when loops may be false (see docs/graph.md)."""
-    m = params.init
+    m = params.solver.init
     if m == InitMethod.AUTO:
-        if params.robust == RobustMode.NONE:
+        if params.robust.method == RobustMode.NONE:
             return InitMethod.LAGO if data.dim == 2 else InitMethod.CHORDAL
         return InitMethod.ODOMETRY
     if m == InitMethod.LAGO and data.dim != 2:
@@ -82,7 +82,7 @@ def build(data: PoseGraphData, params: GraphParams) -> BuiltGraph:
     cache = NoiseCache(data.dim)
     odo_idx = np.flatnonzero(~data.is_loop)
     loop_idx = np.flatnonzero(data.is_loop)
-    priors = prior_factors(data, anchors, data.poses, params.anchor_sigma)
+    priors = prior_factors(data, anchors, data.poses, params.solver.anchor_sigma)
     odometry = between_factors(data, odo_idx, a, b, cache=cache)
     loops = between_factors(data, loop_idx, a, b, information_scale(data.probability[loop_idx], params), cache)
     return BuiltGraph(priors, odometry, loops, odo_idx, loop_idx, anchors, a, b)
@@ -122,9 +122,9 @@ def _diagonal_factors(data: PoseGraphData, built: BuiltGraph) -> list:
 
 def lm_params(params: GraphParams, max_iter: int | None = None) -> gtsam.LevenbergMarquardtParams:
     p = gtsam.LevenbergMarquardtParams()
-    p.setMaxIterations(params.lm_max_iterations if max_iter is None else max_iter)
-    p.setRelativeErrorTol(params.lm_relative_tol)
-    p.setAbsoluteErrorTol(params.lm_absolute_tol)
+    p.setMaxIterations(params.solver.lm_max_iterations if max_iter is None else max_iter)
+    p.setRelativeErrorTol(params.solver.lm_relative_tol)
+    p.setAbsoluteErrorTol(params.solver.lm_absolute_tol)
     return p
 
 
@@ -135,9 +135,9 @@ def _lm(graph, values, params: GraphParams) -> tuple[gtsam.Values, int]:
 
 def mestimator(mode: RobustMode, params: GraphParams):
     if mode == RobustMode.HUBER:
-        return gtsam.noiseModel.mEstimator.Huber.Create(params.huber_k)
+        return gtsam.noiseModel.mEstimator.Huber.Create(params.robust.huber_k)
     if mode == RobustMode.CAUCHY:
-        return gtsam.noiseModel.mEstimator.Cauchy.Create(params.cauchy_k)
+        return gtsam.noiseModel.mEstimator.Cauchy.Create(params.robust.cauchy_k)
     return None
 
 
@@ -162,9 +162,9 @@ def mestimator_weights(r2: np.ndarray, mode: RobustMode, params: GraphParams) ->
     """IRLS weight of each loop at its residual (Huber / Cauchy); 1 for least squares."""
     r = np.sqrt(np.maximum(np.asarray(r2, float), 0.0))
     if mode == RobustMode.HUBER:
-        return np.where(r <= params.huber_k, 1.0, params.huber_k / np.maximum(r, 1e-300))
+        return np.where(r <= params.robust.huber_k, 1.0, params.robust.huber_k / np.maximum(r, 1e-300))
     if mode == RobustMode.CAUCHY:
-        return 1.0 / (1.0 + (r / params.cauchy_k) ** 2)
+        return 1.0 / (1.0 + (r / params.robust.cauchy_k) ** 2)
     return np.ones_like(r)
 
 
@@ -191,20 +191,22 @@ def solve(data: PoseGraphData, params: GraphParams, candidates: np.ndarray | Non
     gnc_iters = 0
     sub = built.subset(cand)
     inlier = np.zeros(L, bool)
-    if params.robust == RobustMode.GNC and params.gnc_impl == GncImpl.WARM:
+    if params.robust.method == RobustMode.GNC and params.robust.gnc_impl == GncImpl.WARM:
         out = gnc_optimize(graph_of(built.priors + built.odometry), sub.loops, init_values, c2[cand],
-                           loss=params.gnc_loss, mu_step=params.gnc_mu_step, max_iterations=params.gnc_max_iterations,
-                           inner_iterations=params.gnc_inner_iterations, final_iterations=params.lm_max_iterations,
-                           weights_tol=params.gnc_weights_tol, cost_tol=params.gnc_cost_tol,
-                           rel_tol=params.lm_relative_tol, abs_tol=params.lm_absolute_tol,
-                           mu_floor=params.gnc_mu_floor if candidates is not None else 0.0)
+                           loss=params.robust.gnc_loss, mu_step=params.robust.gnc_mu_step,
+                           max_iterations=params.robust.gnc_max_iterations,
+                           inner_iterations=params.robust.gnc_inner_iterations,
+                           final_iterations=params.solver.lm_max_iterations,
+                           weights_tol=params.robust.gnc_weights_tol, cost_tol=params.robust.gnc_cost_tol,
+                           rel_tol=params.solver.lm_relative_tol, abs_tol=params.solver.lm_absolute_tol,
+                           mu_floor=params.robust.gnc_mu_floor if candidates is not None else 0.0)
         values, iters, gnc_iters = out.values, out.lm_iterations, out.outer_iterations
         initial_cost, final_cost = out.initial_cost, out.final_cost
         inlier[cand] = out.weights > 0.5
-    elif params.robust == RobustMode.GNC:
+    elif params.robust.method == RobustMode.GNC:
         g = sub.graph()
         gp = gtsam.GncLMParams(lm_params(params))
-        gp.setLossType(gtsam.GncLossType.TLS if params.gnc_loss == GncLoss.TLS else gtsam.GncLossType.GM)
+        gp.setLossType(gtsam.GncLossType.TLS if params.robust.gnc_loss == GncLoss.TLS else gtsam.GncLossType.GM)
         gp.setKnownInliers(list(range(len(built.priors) + len(built.odometry))))
         opt = gtsam.GncLMOptimizer(g, init_values, gp)
         # gtsam takes one threshold for all factors (on the error 0.5 r^2): the median loop threshold
@@ -217,29 +219,29 @@ def solve(data: PoseGraphData, params: GraphParams, candidates: np.ndarray | Non
         final_cost = float(built.graph(inlier).error(values))
         notes.append("gtsam.GncLMOptimizer: iteration count not exposed")
     else:
-        g = graph_of(built.priors + built.odometry + robust_loop_factors(sub.loops, params.robust, params))
+        g = graph_of(built.priors + built.odometry + robust_loop_factors(sub.loops, params.robust.method, params))
         opt = gtsam.LevenbergMarquardtOptimizer(g, init_values, lm_params(params))
         values = opt.optimize()
         iters = int(opt.iterations())
         initial_cost, final_cost = float(g.error(init_values)), float(g.error(values))
         r2 = squared_residuals(built.loops, values)
         inlier = cand & (r2 <= c2)
-    if params.robust != RobustMode.NONE and params.reinit_rounds > 0 and L:
+    if params.robust.method != RobustMode.NONE and params.robust.reinit_rounds > 0 and L:
         values, inlier, final_cost, rounds, it2, scale = _reinit_rounds(data, built, params, values, inlier, c2)
         iters += it2
         notes.append(f"re-initialised from the kept loops: {rounds} round(s); residual scale {scale:.3g}")
     r2 = squared_residuals(built.loops, values)
-    if params.robust in (RobustMode.GNC, RobustMode.NONE):
-        weights = inlier.astype(float) if params.robust == RobustMode.GNC else np.ones(L)
+    if params.robust.method in (RobustMode.GNC, RobustMode.NONE):
+        weights = inlier.astype(float) if params.robust.method == RobustMode.GNC else np.ones(L)
     else:
-        weights = mestimator_weights(r2, params.robust, params)
-    if params.robust == RobustMode.NONE:
+        weights = mestimator_weights(r2, params.robust.method, params)
+    if params.robust.method == RobustMode.NONE:
         inlier = r2 <= c2            # least squares keeps every loop; the label says whether it fits
     poses = array_from_values(data.dim, values, data.num_nodes)
     seconds = time.perf_counter() - t0
     notes.append(f"factor construction {t0 - t_start:.3f} s (not in seconds)")
     return GraphResult(data.dim, data.node_ids.copy(), poses, built.loop_idx, inlier, weights, r2, initial_cost,
-                       final_cost, iters, seconds, init_seconds, params.solver.value, params.robust.value,
+                       final_cost, iters, seconds, init_seconds, params.solver.method.value, params.robust.method.value,
                        method.value, gnc_iters, notes)
 
 
@@ -272,7 +274,7 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
         r2 = squared_residuals(built.loops, v)
         return float(base.error(v)) + 0.5 * float(np.minimum(r2, thr).sum()), r2
 
-    budget = [params.reinit_max_solves]
+    budget = [params.robust.reinit_max_solves]
 
     def from_scratch(labels):
         if budget[0] <= 0:
@@ -288,24 +290,24 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
     r2 = squared_residuals(built.loops, values)
     pos_a, pos_b = built.a[built.loop_idx], built.b[built.loop_idx]
     scale = 1.0
-    for rounds in range(1, params.reinit_rounds + 1):
-        if params.calibrate_noise:
-            scale = fence_scale(r2[inlier], dof, params.fence_factor, params.fence_quantile)
+    for rounds in range(1, params.robust.reinit_rounds + 1):
+        if params.robust.calibrate_noise:
+            scale = fence_scale(r2[inlier], dof, params.robust.fence_factor, params.robust.fence_quantile)
         thr = c2 * scale
         best_f, r2 = tls(values, thr)
         proposals = []
         candidates = [inlier, inlier & (r2 <= thr)]
-        if params.readmit_factor > 1.0:
-            near = ~inlier & (r2 <= params.readmit_factor * thr)
+        if params.robust.readmit_factor > 1.0:
+            near = ~inlier & (r2 <= params.robust.readmit_factor * thr)
             if near.any():
                 candidates.append((inlier & (r2 <= thr)) | near)
-        if params.isolation_window > 0:
-            iso = isolated(pos_a, pos_b, inlier, params.isolation_window)
-            if iso.sum() > params.isolation_max_tests:
+        if params.robust.isolation_window > 0:
+            iso = isolated(pos_a, pos_b, inlier, params.robust.isolation_window)
+            if iso.sum() > params.robust.isolation_max_tests:
                 # joint marginals cost ~1-25 ms each: test the isolated loops closest to their threshold
                 ratio = np.where(iso, r2 / thr, -np.inf)
                 iso = np.zeros_like(iso)
-                iso[np.argsort(-ratio)[:params.isolation_max_tests]] = True
+                iso[np.argsort(-ratio)[:params.robust.isolation_max_tests]] = True
             w = standardized_residuals(built.graph(inlier), values, built.loops, iso)
             candidates.append(candidates[1] & ~(iso & (w > thr)))
         for n, labels in enumerate(candidates):

@@ -44,8 +44,8 @@ PENDING, ADMITTED, DEFERRED, REJECTED = 0, 1, 2, 3
 
 def _isam_params(params: GraphParams, factorization: str) -> gtsam.ISAM2Params:
     p = gtsam.ISAM2Params()
-    p.setRelinearizeThreshold(params.isam2_relinearize_threshold)
-    p.relinearizeSkip = params.isam2_relinearize_skip
+    p.setRelinearizeThreshold(params.solver.isam2_relinearize_threshold)
+    p.relinearizeSkip = params.solver.isam2_relinearize_skip
     p.setFactorization(factorization.upper())
     return p
 
@@ -58,7 +58,7 @@ class IncrementalPoseGraph:
             raise ValueError(f"dim must be 2 or 3, got {dim}")
         self.dim = dim
         self.params = params or GraphParams()
-        self._factorization = self.params.isam2_factorization
+        self._factorization = self.params.solver.isam2_factorization
         self._isam = gtsam.ISAM2(_isam_params(self.params, self._factorization))
         self._trusted: list = []                      # prior and odometry factors handed to iSAM2 (for a rebuild)
         self._noise = NoiseCache(dim)
@@ -77,13 +77,15 @@ class IncrementalPoseGraph:
         self._loop_robust: list[bool] = []            # in iSAM2 behind the kernel (not yet classified)
         self._loop_state: list[int] = []
         self._loop_c2: list[float] = []
-        self._arrival_r2: deque[float] = deque(maxlen=self.params.gate_window)
-        self._admitted_r2: deque[float] = deque(maxlen=self.params.gate_window)   # arrival r^2 of admitted loops
-        self._gating = self.params.gate_loops and self.params.robust != RobustMode.NONE
+        self._arrival_r2: deque[float] = deque(maxlen=self.params.robust.gate_window)
+        # arrival r^2 of admitted loops
+        self._admitted_r2: deque[float] = deque(maxlen=self.params.robust.gate_window)
+        self._gating = self.params.robust.gate_loops and self.params.robust.method != RobustMode.NONE
         self._c2_cache: dict[float, float] = {}
         dof = TANGENT_DIM[dim]
-        self._c2_base = float(chi2.ppf(self.params.inlier_probability, dof))
-        self._gate_extra = float(chi2.ppf(self.params.gate_probability, dof) - chi2.ppf(self.params.inlier_probability, dof))
+        self._c2_base = float(chi2.ppf(self.params.robust.inlier_probability, dof))
+        self._gate_extra = float(chi2.ppf(self.params.robust.gate_probability, dof)
+                                 - chi2.ppf(self.params.robust.inlier_probability, dof))
         self._info_ok: dict[bytes, np.ndarray] = {}
         self._drift: list = []                        # per node: first odometry link (older key, Ad, cov) or None
         self._since: dict[int, np.ndarray] = {}       # drift covariance since the last loop closure (memo)
@@ -106,7 +108,7 @@ class IncrementalPoseGraph:
         node_id = int(node_id)
         if node_id in self._key:
             raise ValueError(f"node {node_id} already exists")
-        if len(self._pending_nodes) >= self.params.isam2_batch_nodes and \
+        if len(self._pending_nodes) >= self.params.incremental.batch_nodes and \
                 all(self._guess[k] is not None for k in self._pending_nodes):
             self.update()
         k = len(self._ids)
@@ -118,7 +120,7 @@ class IncrementalPoseGraph:
         if k == 0:
             anchor = to_pose(self.dim, g) if g is not None else (gtsam.Pose2() if self.dim == 2 else gtsam.Pose3())
             g = from_pose(self.dim, anchor)
-            nm = gtsam.noiseModel.Isotropic.Sigma(TANGENT_DIM[self.dim], self.params.anchor_sigma)
+            nm = gtsam.noiseModel.Isotropic.Sigma(TANGENT_DIM[self.dim], self.params.solver.anchor_sigma)
             prior = gtsam.PriorFactorPose2 if self.dim == 2 else gtsam.PriorFactorPose3
             self._pending_factors.append(prior(0, anchor, nm))
         self._guess.append(g)
@@ -193,7 +195,8 @@ class IncrementalPoseGraph:
         if self._drift[kj] is not None:
             return
         q = np.linalg.inv(gtsam_information(self.dim, info))
-        ad = np.asarray(zp.inverse().AdjointMap(), float) if self.params.gate_drift_transport else np.eye(len(q))
+        transport = self.params.robust.gate_drift_transport
+        ad = np.asarray(zp.inverse().AdjointMap(), float) if transport else np.eye(len(q))
         self._drift[kj] = (ki, ad, q)
 
     def _edge_args(self, i, j, delta, cov, information):
@@ -212,13 +215,15 @@ class IncrementalPoseGraph:
         the stated units does nothing where the stated information is far looser than the data (w10000: residuals
         ~0.05 whitened), and admitted false loops would bend the online map; so width^2 = min(k^2,
         `gate_kernel_factor` x lower quartile of the recent arrival r^2)."""
-        mode = self.params.isam2_loop_kernel if self.params.robust == RobustMode.GNC else self.params.robust
+        mode = self.params.robust.method
+        if mode == RobustMode.GNC:
+            mode = self.params.incremental.loop_kernel
         if mode not in (RobustMode.CAUCHY, RobustMode.HUBER):
             return factor
-        k = self.params.cauchy_k if mode == RobustMode.CAUCHY else self.params.huber_k
-        if self._gating and len(self._arrival_r2) >= self.params.gate_min_loops:
-            q = float(np.quantile(np.fromiter(self._arrival_r2, float), self.params.gate_quantile))
-            k = min(k, float(np.sqrt(self.params.gate_kernel_factor * q)))
+        k = self.params.robust.cauchy_k if mode == RobustMode.CAUCHY else self.params.robust.huber_k
+        if self._gating and len(self._arrival_r2) >= self.params.robust.gate_min_loops:
+            q = float(np.quantile(np.fromiter(self._arrival_r2, float), self.params.robust.gate_quantile))
+            k = min(k, float(np.sqrt(self.params.robust.gate_kernel_factor * q)))
         k = max(k, 1e-6)
         est = (gtsam.noiseModel.mEstimator.Cauchy.Create(k) if mode == RobustMode.CAUCHY
                else gtsam.noiseModel.mEstimator.Huber.Create(k))
@@ -244,16 +249,17 @@ class IncrementalPoseGraph:
         None while fewer than `gate_min_loops` loops have arrived (they wait); at a final flush whatever has arrived
         is used (inf, the stated model alone, below 3 loops)."""
         n = len(self._arrival_r2)
-        if n < self.params.gate_min_loops and not final:
+        if n < self.params.robust.gate_min_loops and not final:
             return None
         if n < 3:
             return float("inf")
-        q = float(np.quantile(np.fromiter(self._arrival_r2, float), self.params.gate_quantile))
-        if self.params.gate_admitted_cap and len(self._admitted_r2) >= self.params.gate_window // 2:
+        rp = self.params.robust
+        q = float(np.quantile(np.fromiter(self._arrival_r2, float), rp.gate_quantile))
+        if rp.gate_admitted_cap and len(self._admitted_r2) >= rp.gate_window // 2:
             # only with a long admitted history: on a few dozen loops it ratchets the gate tight (CSAIL)
-            q = min(q, self.params.gate_admitted_cap * float(np.quantile(np.fromiter(self._admitted_r2, float),
-                                                                         self.params.gate_quantile)))
-        return self.params.gate_factor * q
+            q = min(q, rp.gate_admitted_cap * float(np.quantile(np.fromiter(self._admitted_r2, float),
+                                                                rp.gate_quantile)))
+        return rp.gate_factor * q
 
     def _uncertainty(self, k: int) -> np.ndarray:
         """Odometry drift of node k since the robot last closed a loop (gtsam tangent order): the covariance of
@@ -293,7 +299,7 @@ class IncrementalPoseGraph:
                 memo_pose[k] = self._current(k)
             v.insert(k, memo_pose[k])
         f = self._loop_factor[s]
-        if not self.params.gate_uncertainty:
+        if not self.params.robust.gate_uncertainty:
             return 2.0 * f.error(v)
         e = np.asarray(f.unwhitenedError(v), float)
         if kj >= ki:
@@ -337,7 +343,7 @@ class IncrementalPoseGraph:
             measured.append((s, r2))
         level = self.gate_level(final)
         if level is None:
-            if not self.params.gate_warmup_stated:
+            if not self.params.robust.gate_warmup_stated:
                 self._held = [s for s, _ in measured]
                 return admitted
             self._held = [s for s, r2 in measured if r2 > self._gate_c2[s]]
@@ -477,11 +483,12 @@ class IncrementalPoseGraph:
         Returns the labels (one per loop, True = inlier).
         """
         self.update(final=True)
-        if not self._loop_edge or self.params.robust == RobustMode.NONE:
+        if not self._loop_edge or self.params.robust.method == RobustMode.NONE:
             return self.loop_inliers()
         t0 = time.perf_counter()
         cand = self.loop_inliers()
-        res = solve(self.to_data(), self.params.replace(solver=Solver.LM, init=InitMethod.GIVEN), candidates=cand)
+        res = solve(self.to_data(), self.params.replace(solver={"method": Solver.LM, "init": InitMethod.GIVEN}),
+                    candidates=cand)
         remove, add = [], []
         for s, ok in enumerate(res.loop_inlier.tolist()):
             in_isam = self._loop_slot[s] >= 0
@@ -512,12 +519,12 @@ class IncrementalPoseGraph:
         self.update(final=True)
         if classify:
             self.classify_loops()
-        if self.params.isam2_final_steps:
+        if self.params.incremental.final_steps:
             t1 = time.perf_counter()
-            for _ in range(self.params.isam2_final_steps):
+            for _ in range(self.params.incremental.final_steps):
                 self._isam.update(force_relinearize=True)
             self.seconds += time.perf_counter() - t1
-            self.updates += self.params.isam2_final_steps
+            self.updates += self.params.incremental.final_steps
             self._estimate = None
         data = self.to_data()
         built = build(data, self.params.replace(solver=Solver.LM))
@@ -525,20 +532,20 @@ class IncrementalPoseGraph:
         r2 = squared_residuals(built.loops, values)
         c2 = np.asarray(self._loop_c2)
         inlier = self.loop_inliers()
-        if self.params.robust == RobustMode.NONE:
+        if self.params.robust.method == RobustMode.NONE:
             inlier = r2 <= c2
         kept = built.graph(inlier)
         guesses = np.array([g if g is not None else np.full(POSE_WIDTH[self.dim], np.nan) for g in self._guess])
         init_cost = float(kept.error(values_from_array(self.dim, guesses))) if np.isfinite(guesses).all() else np.nan
-        if self.params.robust in (RobustMode.GNC, RobustMode.NONE):
-            weights = inlier.astype(float) if self.params.robust == RobustMode.GNC else np.ones(len(inlier))
+        if self.params.robust.method in (RobustMode.GNC, RobustMode.NONE):
+            weights = inlier.astype(float) if self.params.robust.method == RobustMode.GNC else np.ones(len(inlier))
         else:
-            weights = mestimator_weights(r2, self.params.robust, self.params)
+            weights = mestimator_weights(r2, self.params.robust.method, self.params)
         report_seconds = time.perf_counter() - t0
         return GraphResult(self.dim, data.node_ids, data.poses, built.loop_idx, inlier, weights, r2, init_cost,
                            float(kept.error(values)), self.updates, self.seconds, 0.0, Solver.ISAM2.value,
-                           self.params.robust.value, "odometry", 0,
-                           [f"iSAM2: {self.updates} updates, {self.params.isam2_batch_nodes} nodes per update, "
+                           self.params.robust.method.value, "odometry", 0,
+                           [f"iSAM2: {self.updates} updates, {self.params.incremental.batch_nodes} nodes per update, "
                             f"{self._factorization}; report {report_seconds:.3f} s"] + self.notes)
 
 
@@ -585,7 +592,8 @@ def _loop_order(data: PoseGraphData, order: np.ndarray) -> np.ndarray:
 def gate_pass(data: PoseGraphData, params: GraphParams) -> tuple[np.ndarray, np.ndarray]:
     """Replay the graph through the gated iSAM2 pass: (estimate (N, w) in node order, admitted flag per loop in
     data order)."""
-    inc, order = _replay(data, params.replace(gate_loops=True, isam2_batch_nodes=params.gate_batch_nodes))
+    inc, order = _replay(data, params.replace(robust={"gate_loops": True},
+                                                incremental={"batch_nodes": params.incremental.gate_batch_nodes}))
     _, est = inc.estimate()
     admitted = np.zeros(data.num_loops, bool)
     admitted[_loop_order(data, order)] = inc.loop_inliers()
@@ -597,7 +605,7 @@ def full_pass(data: PoseGraphData, params: GraphParams) -> GraphResult:
     Loop results are reported in data order."""
     t0 = time.perf_counter()
     inc, order = _replay(data, params)
-    res = inc.result(classify=params.robust != RobustMode.NONE)
+    res = inc.result(classify=params.robust.method != RobustMode.NONE)
     res.seconds = time.perf_counter() - t0
     perm = np.empty(data.num_loops, np.int64)
     perm[_loop_order(data, order)] = np.arange(data.num_loops)    # data loop r -> arrival slot perm[r]

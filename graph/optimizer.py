@@ -21,13 +21,14 @@ from graph.thresholds import loop_thresholds
 
 def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: Solver | str | None = None,
              robust: RobustMode | str | None = None, init: InitMethod | str | None = None) -> GraphResult:
-    """Optimise a pose graph; keyword arguments override the corresponding `params` fields.
+    """Optimise a pose graph; keyword arguments override `params.solver.method`, `.robust.method`, `.solver.init`.
 
     Every component of the graph is anchored (graph.components: a warning names them when there is more than one).
     Should gtsam still fail (an indeterminate system, a key it cannot find), the graph is solved once more from the
     odometry tree with batch LM and no gate; a second failure is a GraphError naming the cause, never gtsam's.
     """
-    over = {k: v for k, v in (("solver", solver), ("robust", robust), ("init", init)) if v is not None}
+    solver_over = {k: v for k, v in (("method", solver), ("init", init)) if v is not None}
+    over = {k: v for k, v in (("solver", solver_over or None), ("robust", robust)) if v is not None}
     params = (params or GraphParams()).replace(**over)
     if data.num_nodes == 0:
         raise GraphError("the pose graph has no nodes")
@@ -37,7 +38,8 @@ def optimize(data: PoseGraphData, params: GraphParams | None = None, *, solver: 
     except GraphError:
         raise
     except (RuntimeError, IndexError, ValueError) as exc:
-        plain = params.replace(solver=Solver.LM, init=InitMethod.ODOMETRY, gate_loops=False)
+        plain = params.replace(solver={"method": Solver.LM, "init": InitMethod.ODOMETRY},
+                               robust={"gate_loops": False})
         try:
             res = _optimize(data, plain)
         except GraphError:
@@ -56,19 +58,20 @@ def _first_line(exc: BaseException) -> str:
 
 
 def _optimize(data: PoseGraphData, params: GraphParams) -> GraphResult:
-    if params.solver == Solver.ISAM2:
+    if params.solver.method == Solver.ISAM2:
         # the incremental pass gates loops on arrival and classifies them with its own GNC
-        inc = params.replace(robust=RobustMode.GNC) if params.robust == RobustMode.CONSENSUS else params
+        inc = params.replace(robust=RobustMode.GNC) if params.robust.method == RobustMode.CONSENSUS else params
         return incremental.full_pass(data, inc)
-    if params.robust != RobustMode.NONE and data.num_loops and loops_join_odometry_parts(data):
+    if params.robust.method != RobustMode.NONE and data.num_loops and loops_join_odometry_parts(data):
         # the gate and the consensus' odometry-chain start both test loops against odometry, which does not reach
         # across the gap (ETHCampus: the far part ends metres off); the ungated GNC solve keeps those loops
-        res = solve(data, params.replace(robust=RobustMode.GNC) if params.robust == RobustMode.CONSENSUS else params)
+        gnc = params.replace(robust=RobustMode.GNC) if params.robust.method == RobustMode.CONSENSUS else params
+        res = solve(data, gnc)
         res.notes.insert(0, "loops are the only link between parts of the odometry chain: solved without the gate")
         return res
-    if params.robust == RobustMode.CONSENSUS:
+    if params.robust.method == RobustMode.CONSENSUS:
         return robust_solve(data, params)
-    if params.robust != RobustMode.NONE and params.gate_loops and data.num_loops:
+    if params.robust.method != RobustMode.NONE and params.robust.gate_loops and data.num_loops:
         t0 = time.perf_counter()
         try:
             estimate, admitted = incremental.gate_pass(data, params)
@@ -84,12 +87,12 @@ def _optimize(data: PoseGraphData, params: GraphParams) -> GraphResult:
         anc = anchor_nodes(data)
         given = anc[data.has_pose[anc]]
         seeded.poses[given] = data.poses[given]
-        res = solve(seeded, params.replace(init=InitMethod.GIVEN), candidates=admitted)
+        res = solve(seeded, params.replace(solver={"init": InitMethod.GIVEN}), candidates=admitted)
         res.seconds += gate_seconds
         res.init_seconds += gate_seconds
         res.init = f"gated iSAM2 pass ({int(admitted.sum())} of {len(admitted)} loops admitted)"
         res.notes.insert(0, f"gate pass {gate_seconds:.3f} s: {int((~admitted).sum())} loops deferred")
-        if res.loop_inlier.sum() < params.gate_fallback_share * admitted.sum():
+        if res.loop_inlier.sum() < params.robust.gate_fallback_share * admitted.sum():
             # the robust solve threw out most of what the gate admitted: the gate's estimate was a bad start
             # (sphere2500 at 10 %: every loop rejected). Solve without the gate; keep the lower TLS objective.
             alt = solve(data, params)

@@ -1,11 +1,20 @@
-"""Options and tunables of the pose-graph back end, gathered in one config dataclass with named presets.
+"""Options and tunables of the pose-graph back end, split by concern, each group a config with named presets:
 
+- `SolverParams` (`graph.solver`): batch LM or iSAM2, the initial guess, the anchor, LM and iSAM2 settings;
+- `RobustParams` (`graph.robust`): how loop closures are protected against false positives and that method's
+  tunables;
+- `IncrementalParams` (`graph.incremental`): how an iSAM2 pass batches its updates and protects loops online.
+
+`GraphParams` composes the three. A scalar where a group is expected sets the group's method, so
+`GraphParams(robust="huber")`, `params.replace(solver="isam2")` and `--set graph.robust=none` keep working; the
+settings that used to sit flat in `GraphParams` are a ConfigError naming their new key.
 Enums carry the values used on the command line (`--robust gnc|huber|cauchy|none`, `--solver lm|isam2`).
 """
 from __future__ import annotations
 
+import dataclasses
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from odometry.shared.config import Config, setting
 
@@ -54,25 +63,17 @@ class LoopWeighting(str, enum.Enum):
 
 
 @dataclass(frozen=True)
-class GraphParams(Config):
-    """Every tunable of the back end. Start from a preset (`GraphParams.preset("fast")`) and `replace(...)` single
-    fields; strings are accepted for enum fields."""
+class SolverParams(Config):
+    """Which solver, from which initial guess, and its iteration limits (batch LM and iSAM2)."""
 
+    SHORTHAND = "method"
     PRESETS = {
-        # local consensus + GNC-TLS, LM batch; the choice measured in `vslam bench graph` (docs/graph.md)
         "default": {},
-        # fewer iterations and a coarser GNC schedule: for previews and very large graphs
-        "fast": {"lm_max_iterations": 30, "lm_relative_tol": 1e-4, "gnc_mu_step": 2.0, "gnc_max_iterations": 40,
-                 "gnc_inner_iterations": 5, "isam2_batch_nodes": 50, "isam2_relinearize_skip": 20},
-        # tighter inlier test (chi-square 0.95) and a slow GNC schedule: when false loops are common
-        "robust_strict": {"inlier_probability": 0.95, "gnc_mu_step": 1.2, "gnc_max_iterations": 200,
-                          "gnc_inner_iterations": 20},
-        # no robust handling: every loop is trusted (for clean graphs, e.g. benchmarks without outliers)
-        "least_squares": {"robust": "none"},
+        # fewer LM iterations and less frequent relinearisation: for previews and very large graphs
+        "fast": {"lm_max_iterations": 30, "lm_relative_tol": 1e-4, "isam2_relinearize_skip": 20},
     }
 
-    solver: Solver = Solver.LM
-    robust: RobustMode = RobustMode.CONSENSUS
+    method: Solver = Solver.LM
     init: InitMethod = InitMethod.AUTO
     # --- batch Levenberg-Marquardt
     lm_max_iterations: int = setting(100, range="[1, inf)")
@@ -80,7 +81,33 @@ class GraphParams(Config):
     lm_absolute_tol: float = setting(1e-5, range="[0, inf)")
     # --- anchor: a prior on the first node (or on the file's FIX vertices), standard deviation per axis
     anchor_sigma: float = setting(1e-6, range="(0, inf)")
-    # --- robust loops
+    # --- iSAM2
+    isam2_relinearize_threshold: float = setting(0.1, range="[0, inf)")
+    isam2_relinearize_skip: int = setting(10, range="[1, inf)")
+    isam2_factorization: str = setting("cholesky", choices=("cholesky", "qr"))   # QR is 3x slower; Cholesky stops
+    #                                      with "indeterminate system" on near-singular information (CSAIL,
+    #                                      manhattan): then iSAM2 is rebuilt with QR
+
+
+@dataclass(frozen=True)
+class RobustParams(Config):
+    """How loop closures are protected against false positives (odometry is always trusted), and the tunables of
+    each method."""
+
+    SHORTHAND = "method"
+    PRESETS = {
+        # local consensus + GNC-TLS; the choice measured in `vslam bench graph` (docs/graph.md)
+        "default": {},
+        # a coarser GNC schedule: for previews and very large graphs
+        "fast": {"gnc_mu_step": 2.0, "gnc_max_iterations": 40, "gnc_inner_iterations": 5},
+        # tighter inlier test (chi-square 0.95) and a slow GNC schedule: when false loops are common
+        "strict": {"inlier_probability": 0.95, "gnc_mu_step": 1.2, "gnc_max_iterations": 200,
+                   "gnc_inner_iterations": 20},
+        # no robust handling: every loop is trusted
+        "none": {"method": "none"},
+    }
+
+    method: RobustMode = RobustMode.CONSENSUS
     inlier_probability: float = setting(0.99, range="(0.5, 1)",
                                         doc="chi-square quantile of a loop's Mahalanobis residual for an inlier")
     gnc_loss: GncLoss = GncLoss.TLS
@@ -147,9 +174,6 @@ class GraphParams(Config):
     gate_factor: float = setting(50.0, range="[0, inf)", doc="admit up to this many times ...")
     gate_quantile: float = setting(0.25, range="[0, 1]",
                                    doc="... this quantile of the recent arrival r^2 (all gated loops)")
-    gate_batch_nodes: int = setting(50, range="[1, inf)")   # nodes per iSAM2 update in the batch solver's gate pass
-    #                                      (each update costs a relinearisation check and one estimate; the drift in
-    #                                      between is modelled)
     gate_window: int = setting(500, range="[1, inf)", doc="number of recent arrivals in that quantile")
     gate_admitted_cap: float = setting(1.0, range="[0, inf)")   # ... at most this many times that quantile of the
     #                                      recent admitted loops' r^2 (0: off; active from gate_window / 2 admitted
@@ -168,22 +192,65 @@ class GraphParams(Config):
     #                                      (the others wait): for online use with few loops already verified
     #                                      upstream (the pipeline's --incremental); off for public graphs, whose
     #                                      stated noise is too loose to tell false loops by it
-    # --- iSAM2
-    isam2_relinearize_threshold: float = setting(0.1, range="[0, inf)")
-    isam2_relinearize_skip: int = setting(10, range="[1, inf)")
-    isam2_factorization: str = setting("cholesky", choices=("cholesky", "qr"))   # QR is 3x slower; Cholesky stops
-    #                                      with "indeterminate system" on near-singular information (CSAIL,
-    #                                      manhattan): then iSAM2 is rebuilt with QR
-    isam2_batch_nodes: int = setting(10, range="[1, inf)",
-                                     doc="odometry steps buffered per iSAM2 update in a full pass")
-    isam2_loop_kernel: RobustMode = RobustMode.CAUCHY   # online protection before the loops are classified
-    isam2_final_steps: int = setting(2, range="[0, inf)",
-                                     doc="extra empty updates at the end of a pass (more relinearisation)")
     # h14-core: the consensus solve's own GNC schedule (graph.robust). Its starts already carry the loop
-    # corrections, so a coarse schedule reaches the same labels: measured on the tuning half (ring, intel, seed 1)
+    # corrections, so a coarse schedule reaches the same labels: measured on the tuning half (ring, intel, seed 1),
     # mu step 2 / 2 inner iterations gave the same loops and ATE as 1.4 / 5 in half the time (docs/graph.md)
     consensus_mu_step: float = setting(2.0, range="(1, inf)", unit="x per outer step",
                                        doc="factor on the GNC control parameter per outer step (consensus mode)")
     consensus_inner_iterations: int = setting(2, range="[1, inf)", unit="LM iterations",
                                               doc="warm-started LM iterations per GNC outer step (consensus mode); "
                                                   "also caps the least-squares solve of the supported-loop start")
+
+
+@dataclass(frozen=True)
+class IncrementalParams(Config):
+    """How an iSAM2 pass (the pipeline's --incremental, `--solver isam2`, the gate pass) batches its updates and
+    protects loops before they are classified."""
+
+    PRESETS = {
+        "default": {},
+        # fewer, larger iSAM2 updates: for previews and very large graphs
+        "fast": {"batch_nodes": 50},
+    }
+
+    batch_nodes: int = setting(10, range="[1, inf)", unit="nodes",
+                               doc="odometry steps buffered per iSAM2 update in a full pass")
+    loop_kernel: RobustMode = RobustMode.CAUCHY   # online protection before the loops are classified
+    final_steps: int = setting(2, range="[0, inf)", unit="updates",
+                               doc="extra empty updates at the end of a pass (more relinearisation)")
+    gate_batch_nodes: int = setting(50, range="[1, inf)")   # nodes per iSAM2 update in the batch solver's gate pass
+    #                                      (each update costs a relinearisation check and one estimate; the drift in
+    #                                      between is modelled)
+
+
+_MOVED = {name: f"{group}.{new or name}" for group, names in (
+    ("solver", ("init", "lm_max_iterations", "lm_relative_tol", "lm_absolute_tol", "anchor_sigma",
+                "isam2_relinearize_threshold", "isam2_relinearize_skip", "isam2_factorization")),
+    ("incremental", (("isam2_batch_nodes", "batch_nodes"), ("isam2_loop_kernel", "loop_kernel"),
+                     ("isam2_final_steps", "final_steps"), "gate_batch_nodes")),
+    ("robust", tuple(f.name for f in dataclasses.fields(RobustParams) if f.name != "method")),
+) for name, new in ((n, None) if isinstance(n, str) else n for n in names)}
+
+
+@dataclass(frozen=True)
+class GraphParams(Config):
+    """Every tunable of the back end, by concern. Start from a preset (`GraphParams.preset("fast")`) and `replace`
+    single groups or fields (`p.replace(robust={"huber_k": 2.0})`, `p.replace(solver="isam2")`); strings are
+    accepted for enum fields."""
+
+    MOVED = _MOVED
+    PRESETS = {
+        # local consensus + GNC-TLS, LM batch; the choice measured in `vslam bench graph` (docs/graph.md)
+        "default": {},
+        # fewer iterations and a coarser GNC schedule: for previews and very large graphs
+        "fast": {"solver": SolverParams.PRESETS["fast"], "robust": RobustParams.PRESETS["fast"],
+                 "incremental": IncrementalParams.PRESETS["fast"]},
+        # tighter inlier test (chi-square 0.95) and a slow GNC schedule: when false loops are common
+        "robust_strict": {"robust": RobustParams.PRESETS["strict"]},
+        # no robust handling: every loop is trusted (for clean graphs, e.g. benchmarks without outliers)
+        "least_squares": {"robust": RobustParams.PRESETS["none"]},
+    }
+
+    solver: SolverParams = field(default_factory=SolverParams)
+    robust: RobustParams = field(default_factory=RobustParams)
+    incremental: IncrementalParams = field(default_factory=IncrementalParams)

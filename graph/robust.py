@@ -62,17 +62,17 @@ def gnc_tls(base: list, loops: list, values: gtsam.Values, c2: np.ndarray, label
     if np.any(r2_cl > c2_cl):
         pos = excess > 0
         mu = max(float(np.min(c2_cl[pos] / excess[pos])), 1e-6)
-        for outer in range(1, params.gnc_max_iterations + 1):
+        for outer in range(1, params.robust.gnc_max_iterations + 1):
             new_w = tls_weights(r2_cl, c2_cl, mu)
-            values, it = _lm(_weighted(base, loops, new_w[label]), values, params, params.consensus_inner_iterations)
+            values, it = _lm(_weighted(base, loops, new_w[label]), values, params, params.robust.consensus_inner_iterations)
             iters += it
             r2_cl = np.bincount(label, weights=squared_residuals(loops, values), minlength=n_cl)
             change = float(np.max(np.abs(new_w - weights)))
             weights = new_w
-            tol = params.gnc_weights_tol
+            tol = params.robust.gnc_weights_tol
             if bool(np.all((weights < tol) | (weights > 1 - tol))) and change < tol:
                 break
-            mu *= params.consensus_mu_step
+            mu *= params.robust.consensus_mu_step
     return values, (weights > 0.5)[label], outer, iters
 
 
@@ -87,12 +87,12 @@ def _readmit(built, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray, pa
     """Admit every loop that fits its threshold at the solution and re-solve, until none is added (at most
     `readmit_rounds` solves)."""
     iters = 0
-    for _ in range(params.readmit_rounds):
+    for _ in range(params.robust.readmit_rounds):
         readmit = ~inlier & (squared_residuals(built.loops, values) <= c2)
         if not readmit.any():
             break
         inlier = inlier | readmit
-        values, it = _lm(built.graph(inlier), values, params, params.lm_max_iterations)
+        values, it = _lm(built.graph(inlier), values, params, params.solver.lm_max_iterations)
         iters += it
         notes.append(f"admitted {int(readmit.sum())} loops that fit at the solution")
     return values, inlier, iters
@@ -109,8 +109,8 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     base_graph = graph_of(base)
     t0 = time.perf_counter()
     # 1. local consistency
-    pairs = loop_support(data, params.support_window, float(chi2.ppf(params.support_probability, dof)))
-    label = clusters(L, pairs[0], pairs[1]) if (L and params.cluster_weights) else np.arange(L)
+    pairs = loop_support(data, params.robust.support_window, float(chi2.ppf(params.robust.support_probability, dof)))
+    label = clusters(L, pairs[0], pairs[1]) if (L and params.robust.cluster_weights) else np.arange(L)
     supported = np.zeros(L, bool)
     supported[pairs[0]] = True
     supported[pairs[1]] = True
@@ -123,15 +123,15 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             guess = initial_guess(data, built.subset(supported), method)
             # only a start: GNC continues from it (a converged solve here cost 60 s on city10000 at 50 %)
             v, _ = _lm(built.graph(supported), values_from_array(data.dim, guess), params,
-                       params.consensus_inner_iterations)
+                       params.robust.consensus_inner_iterations)
             starts.append(("supported loops", v))
         except RuntimeError:
             notes.append("LAGO / chordal start on the supported loops failed")
-    if params.calibrate_noise and len(pairs[2]) >= params.calibration_min_loops:
+    if params.robust.calibrate_noise and len(pairs[2]) >= params.robust.calibration_min_loops:
         # variance factor from the agreeing cycles: their median error over the chi-square median. Local, so
         # neither drift nor a false loop bending the map (both inflate a global a-posteriori estimate) enter it
         sigma0 = float(np.median(pairs[2])) / float(chi2.ppf(0.5, dof))
-        scale = params.calibration_margin * sigma0
+        scale = params.robust.calibration_margin * sigma0
         c2 = c2 * scale
         notes.append(f"variance factor {sigma0:.3g}: thresholds x {scale:.3g}")
     init_seconds = time.perf_counter() - t0
@@ -140,7 +140,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     iters = 0
     # GNC over the supported loops only: an unsupported loop is tested once the map is solved (step 4). This keeps
     # random long-range loops out of every inner solve (their fill-in is what makes a joint solve slow)
-    cand = supported if params.support_window > 0 else np.ones(L, bool)
+    cand = supported if params.robust.support_window > 0 else np.ones(L, bool)
     sub = built.subset(cand)
     _, sub_label = np.unique(label[cand], return_inverse=True)
 
@@ -157,7 +157,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
 
     for name, v0 in starts:
         run(name, v0)
-    if best is None or (params.odometry_start and not best[3]):
+    if best is None or (params.robust.odometry_start and not best[3]):
         # the odometry start exists for one failure: a group of mutually consistent false loops in the supported
         # set bends the supported start, and the GNC from there keeps the group and rejects the loops it strains
         # (ring, CSAIL). When every supported loop already fits its threshold at the supported start (no GNC step:
@@ -170,20 +170,20 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     _, values, inlier, _ = best
     t_gnc = time.perf_counter()
     # 4. polish; admit the loops that fit at the solution; try the unsupported loops closest to fitting jointly
-    values, it = _lm(built.graph(inlier), values, params, params.lm_max_iterations)
+    values, it = _lm(built.graph(inlier), values, params, params.solver.lm_max_iterations)
     iters += it
     values, inlier, it = _readmit(built, values, inlier, c2, params, notes)
     iters += it
     trial = ~cand & ~inlier
-    if trial.sum() > params.trial_max_loops:
+    if trial.sum() > params.robust.trial_max_loops:
         # the ones nearest to their threshold at the solution, within `readmit_factor` of it: a lone true loop
         # closing a long drift misses it by a few times (manhattan: r^2 18 against 3.3, 0.002 once kept); a random
         # false loop by orders of magnitude, and long-range false loops in every inner solve cost minutes on
         # 10^4-node graphs (fill-in). With few unsupported loops all are tried (ring: 8 m of drift)
         ratio = np.where(trial, squared_residuals(built.loops, values) / c2, np.inf)
-        ratio[ratio > params.readmit_factor] = np.inf
+        ratio[ratio > params.robust.readmit_factor] = np.inf
         trial = np.zeros(L, bool)
-        trial[np.argsort(ratio, kind="stable")[:params.trial_max_loops]] = True
+        trial[np.argsort(ratio, kind="stable")[:params.robust.trial_max_loops]] = True
         trial &= np.isfinite(ratio)
     if trial.any():
         # judged by a GNC that includes them, so the map can move to them; a test at a solution without them
@@ -208,5 +208,5 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     poses = array_from_values(data.dim, values, data.num_nodes)
     seconds = time.perf_counter() - t0
     return GraphResult(data.dim, data.node_ids.copy(), poses, built.loop_idx, inlier, inlier.astype(float), r2,
-                       initial_cost, final_cost, iters, seconds, init_seconds, params.solver.value,
-                       params.robust.value, method.value, 0, notes + [f"build {t0 - t_start:.3f} s"])
+                       initial_cost, final_cost, iters, seconds, init_seconds, params.solver.method.value,
+                       params.robust.method.value, method.value, 0, notes + [f"build {t0 - t_start:.3f} s"])

@@ -1,7 +1,7 @@
 """`RobustPoseGraph`: the one front door of the back end for building a graph and solving it, in batch or online.
 
     from graph import RobustPoseGraph, GraphParams
-    g = RobustPoseGraph(dim=2, params=GraphParams.preset("default"))        # strategy from params.solver
+    g = RobustPoseGraph(dim=2, params=GraphParams.preset("default"))        # strategy from params.solver.method
     g.add_node(0, [0, 0, 0]); g.add_node(1)
     g.add_odometry(0, 1, delta, cov)
     k = g.add_loop(1, 0, delta, cov, probability=0.9)
@@ -36,9 +36,9 @@ class RobustPoseGraph:
         self.dim = dim
         self._batch = PoseGraph(dim, self.params)
         self._inc: IncrementalPoseGraph | None = None
-        if self.params.solver == Solver.ISAM2:
+        if self.params.solver.method == Solver.ISAM2:
             inc = self.params
-            if inc.robust == RobustMode.CONSENSUS:      # the incremental pass classifies with its own GNC
+            if inc.robust.method == RobustMode.CONSENSUS:      # the incremental pass classifies with its own GNC
                 inc = inc.replace(robust=RobustMode.GNC)
             self._inc = IncrementalPoseGraph(dim, inc)
         self._estimate: tuple[np.ndarray, np.ndarray] | None = None
@@ -50,7 +50,7 @@ class RobustPoseGraph:
 
     @classmethod
     def solve(cls, data: PoseGraphData, params: GraphParams | None = None) -> GraphResult:
-        """Optimise a whole graph (e.g. read from a file) with `params` (strategy = params.solver)."""
+        """Optimise a whole graph (e.g. read from a file) with `params` (strategy = params.solver.method)."""
         return optimize(data, params)
 
     # ------------------------------------------------------------------------------------------------ building
@@ -110,13 +110,13 @@ class RobustPoseGraph:
 
     def result(self, warm_start: bool = False) -> GraphResult:
         """The final solve: every loop classified. warm_start (batch): start from the current guesses."""
-        if self._inc is not None and self.params.robust == RobustMode.CONSENSUS:
+        if self._inc is not None and self.params.robust.method == RobustMode.CONSENSUS:
             # the final labels come from the batch consensus solve started at the iSAM2 estimate: the online gate
             # tests loops against the drifted estimate at their arrival and rejects true loops under large drift
             online = self._inc.result(classify=False)
             data = self._inc.to_data()
             data.poses = online.poses
-            res = optimize(data, self.params.replace(solver=Solver.LM, init=InitMethod.GIVEN))
+            res = optimize(data, self.params.replace(solver={"method": Solver.LM, "init": InitMethod.GIVEN}))
             res.seconds += online.seconds
             res.solver = Solver.ISAM2.value            # the strategy that produced the online estimates
             res.notes.insert(0, f"iSAM2 pass {online.seconds:.3f} s, then the batch consensus solve from it")
@@ -124,7 +124,7 @@ class RobustPoseGraph:
             res = self._inc.result(classify=True)
         else:
             data = self._batch.to_data()
-            res = optimize(data, self.params.replace(init=InitMethod.GIVEN) if warm_start else self.params)
+            res = optimize(data, self.params.replace(solver={"init": InitMethod.GIVEN}) if warm_start else self.params)
         self._result = res
         self._estimate = (res.node_ids, res.poses)
         return res

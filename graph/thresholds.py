@@ -9,7 +9,7 @@ from graph.params import GraphParams, LoopWeighting
 
 def base_threshold(dof: int, params: GraphParams) -> float:
     """Squared Mahalanobis residual below which a loop is an inlier: the chi-square quantile."""
-    return float(chi2.ppf(params.inlier_probability, dof))
+    return float(chi2.ppf(params.robust.inlier_probability, dof))
 
 
 def loop_thresholds(probability: np.ndarray, dof: int, params: GraphParams) -> np.ndarray:
@@ -22,19 +22,19 @@ def loop_thresholds(probability: np.ndarray, dof: int, params: GraphParams) -> n
     p = np.asarray(probability, float).reshape(-1)
     base = base_threshold(dof, params)
     c2 = np.full(len(p), base)
-    if params.loop_weighting == LoopWeighting.THRESHOLD and len(p):
+    if params.robust.loop_weighting == LoopWeighting.THRESHOLD and len(p):
         known = np.isfinite(p)
-        pc = np.clip(p[known], params.probability_clip, 1.0 - params.probability_clip)
+        pc = np.clip(p[known], params.robust.probability_clip, 1.0 - params.robust.probability_clip)
         c2[known] = np.maximum(base + 2.0 * np.log(pc / (1.0 - pc)), 0.05 * base)
     return c2
 
 
 def information_scale(probability: np.ndarray, params: GraphParams) -> np.ndarray | None:
     """Factor on each loop's information with INFORMATION weighting (p; 1 where unknown), else None."""
-    if params.loop_weighting != LoopWeighting.INFORMATION:
+    if params.robust.loop_weighting != LoopWeighting.INFORMATION:
         return None
     p = np.asarray(probability, float).reshape(-1)
-    return np.where(np.isfinite(p), np.clip(p, params.probability_clip, 1.0), 1.0)
+    return np.where(np.isfinite(p), np.clip(p, params.robust.probability_clip, 1.0), 1.0)
 
 
 def fence_scale(r2_inliers: np.ndarray, dof: int, factor: float, quantile: float = 0.9, floor: float = 1e-6,

@@ -68,6 +68,14 @@ class RunRecorder:
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id, send_properties=False,
                                       batcher_config=batching)
         self.rec.save(str(self._tmp))       # the blueprint is sent by close(), when the scene's extent is known
+        try:
+            self._start(camera, jpeg_quality, image_every, image_scale)
+        except BaseException:   # e.g. SIGTERM while the static scene is logged: leave no .partial behind
+            self.abort()
+            raise
+
+    def _start(self, camera, jpeg_quality: int, image_every: int, image_scale: float) -> None:
+        rr = self.rr
         self.rec.set_log_time_enabled(False)
         self.jpeg_quality = int(jpeg_quality)
         self.image_every = max(1, int(image_every))

@@ -26,6 +26,10 @@ and gets, with no code of its own:
 - `obj.with_overrides(["loops.mode=5", "graph.robust=huber"])`: command-line style dotted assignments, each value
   read as a YAML scalar (`5`, `1e-5`, `true`, `null`, `[8, 6]`, `huber`).
 - `Cls.describe()`: a plain-text table of every dotted key with its default, range or choices, unit and doc.
+- `SHORTHAND = "method"` (class attribute): a scalar given where this config is expected, as a nested field, sets
+  that one field (`graph.robust=none` for `graph.robust.method=none`), on top of the base when replacing.
+- `MOVED = {"old_key": "group.new_key"}` (class attribute): a key that moved into a nested config is a ConfigError
+  naming its new dotted key, not an unknown setting.
 
 Tunables are documented where they are declared, with `setting(default, range=..., unit=..., doc=...)`: the
 range is an interval written as text ("[1, inf)", "(0, 1]", "(0.5, 1)") or a (low, high) pair, closed, None for
@@ -193,6 +197,8 @@ def _convert(tp: Any, value: Any, where: str, base: Any = None) -> Any:
     if dataclasses.is_dataclass(tp):
         if isinstance(value, tp):
             return value
+        if not isinstance(value, Mapping) and getattr(tp, "SHORTHAND", None):
+            value = {tp.SHORTHAND: value}    # `robust: none` for `robust: {method: none}`
         if not isinstance(value, Mapping):
             raise _Problem(where, f"expected a mapping of {tp.__name__} settings, got {value!r}")
         return _build(tp, value, where, base)
@@ -307,6 +313,9 @@ def _build(cls: type, data: Mapping, where: str, base: Any = None) -> Any:
     for key, value in data.items():
         path = _join(where, str(key))
         if key not in by_name:
+            moved = getattr(cls, "MOVED", {}).get(key)
+            if moved is not None:
+                raise _Problem(path, f"this setting moved to {_join(where, moved)}")
             raise _Problem(path, _unknown(cls, str(key)))
         f, tp = by_name[key]
         kwargs[key] = _convert(tp, value, path, getattr(base, key, None))
@@ -399,6 +408,8 @@ class Config:
 
     PRESETS: ClassVar[Mapping[str, Mapping[str, Any]]] = {}
     LABEL: ClassVar[str | None] = None   # how preset errors name this kind of configuration (default: class name)
+    SHORTHAND: ClassVar[str | None] = None   # a scalar given where this config is expected sets this field
+    MOVED: ClassVar[Mapping[str, str]] = {}   # former keys -> their dotted key relative to this config (an error)
 
     def __post_init__(self) -> None:
         owner = type(self).__name__

@@ -66,7 +66,7 @@ def test_many_false_loops_gnc_recovers_the_clean_solution(gate):
     data, truth = two_lap_graph(seed=1)
     clean = optimize(data, GraphParams.preset("least_squares"))
     bad, injected = inject_false_loops(data, 0.5, seed=3)
-    res = optimize(bad, GraphParams().replace(gate_loops=gate))
+    res = optimize(bad, GraphParams().replace(robust={"gate_loops": gate}))
     sc = loop_scores(res.loop_inlier, injected[bad.is_loop])
     assert sc.false_rejected == 1.0
     assert sc.recall >= 0.95
@@ -76,7 +76,7 @@ def test_many_false_loops_gnc_recovers_the_clean_solution(gate):
 def test_gtsam_gnc_backend_runs_and_labels():
     data, _ = two_lap_graph()
     bad = data.append_edges([data.node_ids[40]], [data.node_ids[3]], [[0.5, 0.0, 0.3]], [data.information[0]], True)
-    res = optimize(bad, GraphParams().replace(gnc_impl="gtsam", gate_loops=False, reinit_rounds=0))
+    res = optimize(bad, GraphParams().replace(robust={"gnc_impl": "gtsam", "gate_loops": False, "reinit_rounds": 0}))
     assert not res.loop_inlier[-1] and res.loop_inlier[:-1].all()
 
 
@@ -86,7 +86,7 @@ def test_probability_shifts_the_threshold():
     p = GraphParams()
     c = loop_thresholds(np.array([np.nan, 0.5, 0.99, 0.01]), 3, p)
     assert c[0] == pytest.approx(c[1]) and c[2] > c[0] > c[3] > 0
-    assert np.all(loop_thresholds(np.array([0.01, 0.99]), 3, p.replace(loop_weighting="none")) == c[0])
+    assert np.all(loop_thresholds(np.array([0.01, 0.99]), 3, p.replace(robust={"loop_weighting": "none"})) == c[0])
 
 
 def test_result_maps_ids_and_writers(tmp_path):

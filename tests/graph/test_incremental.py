@@ -12,7 +12,7 @@ def graph(seed=0, laps=3):
 @pytest.mark.parametrize("batch", [1, 7])
 def test_isam2_and_batch_agree(batch):
     data, _ = graph()
-    params = GraphParams.preset("least_squares").replace(isam2_batch_nodes=batch)
+    params = GraphParams.preset("least_squares").replace(incremental={"batch_nodes": batch})
     lm = optimize(data, params)
     inc = optimize(data, params, solver="isam2")
     assert inc.solver == "isam2" and lm.solver == "lm"
@@ -23,7 +23,7 @@ def test_isam2_and_batch_agree(batch):
 
 def test_incremental_api_places_nodes_by_odometry_and_caches_the_estimate():
     data, truth = graph()
-    inc = IncrementalPoseGraph(params=GraphParams().replace(isam2_batch_nodes=5))
+    inc = IncrementalPoseGraph(params=GraphParams().replace(incremental={"batch_nodes": 5}))
     a, b = data.edge_index_pairs()
     loops = []
     for k, nid in enumerate(data.node_ids.tolist()):
@@ -61,7 +61,8 @@ def test_incremental_gate_and_classification_remove_a_false_loop():
 
 def test_classify_loops_removes_from_and_readds_to_isam2():
     data, _ = graph(seed=4)
-    inc = IncrementalPoseGraph(params=GraphParams().replace(gate_loops=False, isam2_batch_nodes=3))
+    params = GraphParams().replace(robust={"gate_loops": False}, incremental={"batch_nodes": 3})
+    inc = IncrementalPoseGraph(params=params)
     inc.add_node(0, [0, 0, 0])
     for k in range(1, data.num_nodes):
         inc.add_node(k)

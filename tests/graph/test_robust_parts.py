@@ -3,7 +3,7 @@ import pytest
 
 from graph import GraphParams, inject_false_loops, loop_scores
 from graph.gnc import gm_weights, initial_mu, tls_weights
-from graph.params import GncLoss
+from graph.params import GncLoss, RobustParams
 from graph.thresholds import fence_scale
 from tests.graph.synth import noisy_graph, square_laps
 
@@ -55,11 +55,14 @@ def test_loop_scores():
 
 
 def test_params_presets_and_validation():
-    assert GraphParams.preset("default").robust.value == "consensus"
-    assert GraphParams.preset("fast").lm_max_iterations < GraphParams.preset("default").lm_max_iterations
-    assert GraphParams.preset("robust_strict").inlier_probability < GraphParams.preset("default").inlier_probability
-    assert GraphParams.preset("default").replace(robust="huber", solver="isam2").solver.value == "isam2"
+    assert GraphParams.preset("default").robust.method.value == "consensus"
+    default = GraphParams.preset("default")
+    assert GraphParams.preset("fast").solver.lm_max_iterations < default.solver.lm_max_iterations
+    assert GraphParams.preset("fast").incremental.batch_nodes > default.incremental.batch_nodes
+    assert GraphParams.preset("robust_strict").robust.inlier_probability < default.robust.inlier_probability
+    assert GraphParams.preset("least_squares").robust == RobustParams.preset("none")
+    assert default.replace(robust="huber", solver="isam2").solver.method.value == "isam2"
     with pytest.raises(ValueError):
         GraphParams.preset("default").replace(robust="tukey")
     with pytest.raises(ValueError, match="gnc_mu_step"):
-        GraphParams(gnc_mu_step=1.0)
+        GraphParams(robust={"gnc_mu_step": 1.0})

@@ -49,7 +49,7 @@ def test_online_graph_as_the_pipeline_feeds_it_keeps_the_single_true_loop(data, 
     """Nodes with odometry guesses, one update() per node, the loop with its P(loop); then result()."""
     a, b = data.edge_index_pairs()
     newer = np.maximum(a, b)
-    inc = IncrementalPoseGraph(2, GraphParams().replace(isam2_batch_nodes=1))
+    inc = IncrementalPoseGraph(2, GraphParams().replace(incremental={"batch_nodes": 1}))
     for k in range(data.num_nodes):
         inc.add_node(int(data.node_ids[k]), data.poses[k])
         for e in np.flatnonzero(newer == k).tolist():

@@ -121,7 +121,7 @@ def test_config_files(tmp_path):
     t = tmp_path / "c.toml"
     t.write_text("[loops]\nmode = 6\n[graph]\nrobust = \"huber\"\n")
     cfg = PipelineConfig.load(t)
-    assert cfg.loops.mode == 6 and cfg.graph.robust.value == "huber"
+    assert cfg.loops.mode == 6 and cfg.graph.robust.method.value == "huber"
     # round trip of the full default config
     d = tmp_path / "default.yaml"
     d.write_text(PipelineConfig().dumps())
@@ -131,7 +131,7 @@ def test_config_files(tmp_path):
 @pytest.mark.parametrize("text,match", [
     ("loops: {mdoe: 3}\n", r"c.yaml: loops.mdoe: unknown setting"),
     ("loops: {mode: 9}\n", r"c.yaml: loops: .*mode must be one of"),
-    ("graph: {robust: maybe}\n", r"c.yaml: graph.robust: 'maybe' is not one of"),
+    ("graph: {robust: maybe}\n", r"c.yaml: graph.robust.method: 'maybe' is not one of"),
     ("vo: {max_features: many}\n", r"c.yaml: vo.max_features: expected an integer"),
     ("loops: [1, 2\n", r"c.yaml: cannot parse"),
 ])

@@ -70,11 +70,12 @@ def run_sequence(sequence: str | Path, out: str | Path, config: PipelineConfig |
     noted = note_bad_frames(seq)
     out = prepare_out_dir(out, RUN_OUTPUTS, overwrite)
     recorder = None
-    if config.recording.enabled:
-        recorder = RunRecorder(out / "recording.rrd", seq.camera, recording_id=f"vslam-{seq.name}",
-                               jpeg_quality=config.recording.jpeg_quality, image_every=config.recording.image_every,
-                               image_scale=config.recording.image_scale)
     try:
+        if config.recording.enabled:   # inside the try: an interrupt right after it opened must not leave a .partial
+            recorder = RunRecorder(out / "recording.rrd", seq.camera, recording_id=f"vslam-{seq.name}",
+                                   jpeg_quality=config.recording.jpeg_quality,
+                                   image_every=config.recording.image_every,
+                                   image_scale=config.recording.image_scale)
         result = Pipeline(config, recorder=recorder).run(seq, progress=progress, max_frames=max_frames)
     except BaseException:
         if recorder is not None:

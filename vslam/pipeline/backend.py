@@ -12,12 +12,12 @@ def floored(cov: np.ndarray) -> np.ndarray:
 
 
 def backend_graph(params: GraphParams, incremental: bool) -> RobustPoseGraph:
-    """Batch (`params.solver` LM) or iSAM2 (`--incremental`) back end.
+    """Batch (`params.solver.method` LM) or iSAM2 (`--incremental`) back end.
 
     Online, loops reach the graph already verified (geometry + P(loop) threshold) and a run may close only a few:
     the iSAM2 strategy admits those that fit the stated model at once instead of waiting for the gate's 20-loop
     warm-up (`gate_warmup_stated`).
     """
     if incremental:
-        return RobustPoseGraph(2, params.replace(gate_warmup_stated=True), strategy=Solver.ISAM2)
+        return RobustPoseGraph(2, params.replace(robust={"gate_warmup_stated": True}), strategy=Solver.ISAM2)
     return RobustPoseGraph(2, params)

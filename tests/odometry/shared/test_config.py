@@ -7,7 +7,7 @@ from typing import Literal
 
 import pytest
 
-from graph.params import GraphParams, RobustMode
+from graph.params import GraphParams, IncrementalParams, RobustMode, RobustParams, SolverParams
 from loops.cdvs.database import DatabaseParams
 from loops.cdvs.params import CdvsParams, ExtractionParams, MatchParams, ModeParams
 from loops.horizon.params import HorizonParams
@@ -21,8 +21,9 @@ from vslam.sim.render import Effects
 from vslam.sim.sensors import SensorNoise
 from vslam.sim.simulate import SimConfig
 
-ALL = [GraphParams, VocabParams, ExtractionParams, MatchParams, DatabaseParams, HorizonParams, VOConfig, FusionConfig,
-       KeyframePolicy, LoopConfig, RecordingConfig, PipelineConfig, SimConfig, Effects, SensorNoise, FloorParams]
+ALL = [GraphParams, SolverParams, RobustParams, IncrementalParams, VocabParams, ExtractionParams, MatchParams,
+       DatabaseParams, HorizonParams, VOConfig, FusionConfig, KeyframePolicy, LoopConfig, RecordingConfig,
+       PipelineConfig, SimConfig, Effects, SensorNoise, FloorParams]
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ class Outer(Config):
     ("loops: {database: {exclude_recent: -20}}", "loops.database: exclude_recent must be >= 0, got -20"),
     ("loops: {database: {confirmations: -3}}", "loops.database: confirmations must be >= 1, got -3"),
     ("loops: {pose_threshold_px: -3}", "loops: pose_threshold_px must be > 0, got -3.0"),
-    ("graph: {gate_probability: 1.5}", "graph: gate_probability must be in (0, 1), got 1.5"),
+    ("graph: {robust: {gate_probability: 1.5}}", "graph.robust: gate_probability must be in (0, 1), got 1.5"),
     ("keyframes: {angle_deg: .nan}", "keyframes: angle_deg must be > 0, got nan"),
     ("vo: {max_features: 0}", "vo: max_features must be >= 1, got 0"),
     ("loops: {mode: 7}", "loops: mode must be one of 1, 2, 3, 4, 5, 6, got 7"),
@@ -80,8 +81,9 @@ def test_types_are_checked_with_the_dotted_key(tmp_path):
         "vo: {refine_tilt: 1}": "vo.refine_tilt: expected true or false, got 1",
         "loops: {model: 3}": "loops.model: expected a string, got 3",
         "loops: {database: 5}": "loops.database: expected a mapping of DatabaseParams settings, got 5",
-        "graph: {isam2_factorization: lu}": "graph: isam2_factorization must be one of cholesky, qr, got 'lu'",
-        "graph: {robust: maybe}": "graph.robust: 'maybe' is not one of consensus, gnc, huber, cauchy, none",
+        "graph: {solver: {isam2_factorization: lu}}":
+            "graph.solver: isam2_factorization must be one of cholesky, qr, got 'lu'",
+        "graph: {robust: maybe}": "graph.robust.method: 'maybe' is not one of consensus, gnc, huber, cauchy, none",
         "keyframes: {max_frames: 2.5}": "keyframes.max_frames: expected an integer, got 2.5",
     }
     for text, message in cases.items():
@@ -95,16 +97,17 @@ def test_types_are_checked_with_the_dotted_key(tmp_path):
 def test_unknown_keys_are_errors_with_a_suggestion():
     with pytest.raises(ConfigError, match=r"PipelineConfig: loops.databse: unknown setting .*did you mean 'database'"):
         PipelineConfig.from_dict({"loops": {"databse": {}}})
-    with pytest.raises(ConfigError, match=r"GraphParams: zzz: unknown setting .*the known ones are anchor_sigma, "):
+    with pytest.raises(ConfigError, match=r"GraphParams: zzz: unknown .*known ones are incremental, robust, solver"):
         GraphParams.from_dict({"zzz": 1})
     with pytest.raises(ConfigError, match="unknown setting"):
         GraphParams().replace(gnc_mu=2.0)
 
 
 def test_values_are_converted_as_when_loading():
-    cfg = PipelineConfig.from_dict({"vo": {"grid": [4, 3], "quality": "1e-3"}, "graph": {"lm_max_iterations": 50.0}})
-    assert cfg.vo.grid == (4, 3) and cfg.vo.quality == 0.001 and type(cfg.graph.lm_max_iterations) is int
-    assert GraphParams(robust="huber").robust is RobustMode.HUBER           # construction converts too
+    cfg = PipelineConfig.from_dict({"vo": {"grid": [4, 3], "quality": "1e-3"},
+                                    "graph": {"solver": {"lm_max_iterations": 50.0}}})
+    assert cfg.vo.grid == (4, 3) and cfg.vo.quality == 0.001 and type(cfg.graph.solver.lm_max_iterations) is int
+    assert GraphParams(robust="huber").robust.method is RobustMode.HUBER           # construction converts too
     assert Outer(size=[5, 2]).size == (5, 2)
     assert Outer(inner={"gain": 2}).inner == Inner(gain=2.0)
 
@@ -153,7 +156,7 @@ def test_presets():
     assert Outer.preset("loud", count=4).count == 4
     with pytest.raises(ConfigError, match="unknown Outer preset 'soft'; choose one of loud"):
         Outer.preset("soft")
-    assert GraphParams.preset("least_squares").robust is RobustMode.NONE
+    assert GraphParams.preset("least_squares").robust.method is RobustMode.NONE
     assert SensorNoise.preset("none") == SensorNoise(**{k: 0.0 for k in SensorNoise.__dataclass_fields__})
     assert not Effects.preset("none").motion_blur and Effects.preset("none").dropped_frames == 0.0
 
@@ -167,12 +170,14 @@ def test_every_preset_builds(cls):
 # ------------------------------------------------------------------ overrides (--set)
 def test_with_overrides_parses_dotted_yaml_scalars():
     cfg = PipelineConfig().with_overrides(["loops.mode=5", "graph.robust=huber", "vo.grid=[4, 3]", "incremental=true",
-                                           "graph.lm_relative_tol=1e-4", "loops.model=null", "loops.database.shortlist=8"])
-    assert cfg.loops.mode == 5 and cfg.graph.robust is RobustMode.HUBER and cfg.vo.grid == (4, 3) and cfg.incremental
-    assert cfg.graph.lm_relative_tol == 1e-4 and cfg.loops.model is None and cfg.loops.database.shortlist == 8
+                                           "graph.solver.lm_relative_tol=1e-4", "loops.model=null",
+                                           "loops.database.shortlist=8"])
+    assert cfg.loops.mode == 5 and cfg.graph.robust.method is RobustMode.HUBER and cfg.vo.grid == (4, 3)
+    assert cfg.incremental
+    assert cfg.graph.solver.lm_relative_tol == 1e-4 and cfg.loops.model is None and cfg.loops.database.shortlist == 8
     assert cfg.loops.database.confirmations == PipelineConfig().loops.database.confirmations   # the rest is kept
     later = cfg.with_overrides(["loops.mode=2"])
-    assert later.loops.mode == 2 and later.graph.robust is RobustMode.HUBER
+    assert later.loops.mode == 2 and later.graph.robust.method is RobustMode.HUBER
 
 
 @pytest.mark.parametrize("items,message", [
@@ -241,3 +246,63 @@ def test_intervals():
     assert math.inf in Interval.parse("[0, inf]") and math.inf not in Interval.parse("[0, inf)")
     with pytest.raises(ValueError, match="bad range"):
         Interval.parse("0..1")
+
+
+# ------------------------------------------------------------------ nested groups: shorthand and moved keys
+@dataclass(frozen=True)
+class Stage(Config):
+    SHORTHAND = "method"
+
+    method: RobustMode = RobustMode.NONE
+    width: float = setting(1.0, range="(0, inf)")
+
+
+@dataclass(frozen=True)
+class Stages(Config):
+    MOVED = {"width": "stage.width"}
+
+    stage: Stage = field(default_factory=Stage)
+    other: Inner = field(default_factory=Inner)
+
+
+def test_a_scalar_for_a_group_sets_its_method_and_keeps_the_rest():
+    s = Stages(stage="huber")
+    assert s.stage == Stage(method=RobustMode.HUBER)
+    wide = s.replace(stage={"width": 3.0}).replace(stage="cauchy")
+    assert wide.stage == Stage(method=RobustMode.CAUCHY, width=3.0)
+    assert Stages().with_overrides(["stage.width=2"]).with_overrides(["stage=gnc"]).stage == Stage(RobustMode.GNC, 2.0)
+    with pytest.raises(ConfigError, match=r"Stages: stage.method: 'tukey' is not one of"):
+        Stages.from_dict({"stage": "tukey"})
+    with pytest.raises(ConfigError, match="other: expected a mapping of Inner settings, got 5"):
+        Stages.from_dict({"other": 5})                       # no SHORTHAND: a scalar is still an error
+
+
+def test_a_moved_key_names_its_new_home(tmp_path):
+    with pytest.raises(ConfigError, match=r"^Stages: width: this setting moved to stage.width$"):
+        Stages.from_dict({"width": 2.0})
+    path = tmp_path / "old.yaml"
+    path.write_text("graph:\n  lm_max_iterations: 50\n")
+    with pytest.raises(ConfigError) as exc:
+        PipelineConfig.load(path)
+    assert str(exc.value) == f"{path}: graph.lm_max_iterations: this setting moved to graph.solver.lm_max_iterations"
+    with pytest.raises(ConfigError, match=r"^--set: graph.isam2_batch_nodes: this setting moved to "
+                                          r"graph.incremental.batch_nodes$"):
+        PipelineConfig().with_overrides(["graph.isam2_batch_nodes=5"])
+    with pytest.raises(ConfigError, match=r"this setting moved to robust.gate_loops"):
+        GraphParams().replace(gate_loops=False)
+
+
+def test_graph_params_groups_round_trip_and_describe(tmp_path):
+    cfg = PipelineConfig().with_overrides(["graph.robust.huber_k=2", "graph.solver=isam2", "graph.robust.method=huber",
+                                           "graph.incremental.batch_nodes=7"])
+    g = cfg.graph
+    assert (g.robust.method, g.robust.huber_k, g.solver.method.value, g.incremental.batch_nodes) == \
+        (RobustMode.HUBER, 2.0, "isam2", 7)
+    assert g.robust.inlier_probability == GraphParams().robust.inlier_probability      # the rest is kept
+    cfg.dump(tmp_path / "c.yaml")
+    assert PipelineConfig.load(tmp_path / "c.yaml") == cfg
+    text = PipelineConfig.describe()
+    assert "graph.robust.huber_k" in text and "graph.incremental.batch_nodes" in text and "graph.solver.init" in text
+    for name in GraphParams.PRESETS:                         # every group of every preset is a valid group config
+        p = GraphParams.preset(name)
+        assert GraphParams.from_dict(p.to_dict()) == p
