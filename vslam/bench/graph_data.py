@@ -49,6 +49,7 @@ def datasets() -> list[Dataset]:
         Dataset("manhattan", s(v + "manhattan/originalDataset/g2o/manhattanOlson3500.g2o"),
                 s(v + "manhattan/groundTruth/manhattanOlson3500_nodes_groundTruth.dat"), "poses", "M3500"),
         Dataset("city10000", s("se-sync/city10000.g2o"), s(gt + "city10000_groundtruth.txt"), "edges"),
+        Dataset("w10000", wheel / "w10000.graph", None, "", "simulated (Olson), gtsam wheel; reference = clean optimum"),
         Dataset("sphere2500", wheel / "sphere2500.txt", wheel / "sphere2500_groundtruth.txt", "edges", "3D"),
         Dataset("intel", s("se-sync/intel.g2o"), None, "", "real; reference = clean optimum"),
         Dataset("CSAIL", s("se-sync/CSAIL.g2o"), None, "", "real, edges only; reference = clean optimum"),
