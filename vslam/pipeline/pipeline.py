@@ -5,6 +5,8 @@
     result.write("demo/out")
 
 Online use: `p = Pipeline(config, camera)`, then `p.step(image, timestamp, prior)` per frame and `p.finish()`.
+Pipelines that differ only after VO (e.g. in the loop descriptor's mode) can share one VO pass:
+`vo = Pipeline(config).odometry(seq)`, then `Pipeline(other).run(seq, odometry=vo)`.
 """
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -158,15 +160,17 @@ class Pipeline:
         return compose(self.kf_slam[k], between(self.poses_vo[kf], self.poses_vo[index]))
 
     def step(self, image: np.ndarray | None, timestamp: float,
-             prior: tuple[np.ndarray, np.ndarray] | None = None, decode_seconds: float = 0.0) -> FrameOutput:
+             prior: tuple[np.ndarray, np.ndarray] | None = None, decode_seconds: float = 0.0,
+             vo: VOEstimate | None = None) -> FrameOutput:
         """Process one frame. `image` may be None (unreadable frame); `prior` is the wheel/gyro motion since the
-        previous frame and its covariance (the fallback when vision fails)."""
+        previous frame and its covariance (the fallback when vision fails); `vo`, this frame's estimate from an
+        earlier VO pass (`odometry`), replaces running VO."""
         if self.camera is None:
             raise RuntimeError("call reset(camera) first (or give the camera to the constructor)")
         t_frame = time.perf_counter()
         index = len(self.timestamps)
         t0 = time.perf_counter()
-        est = self.vo.process(image, timestamp, fallback=prior)
+        est = self.vo.process(image, timestamp, fallback=prior) if vo is None else vo
         t_vo = time.perf_counter() - t0
         self.timestamps.append(float(timestamp))
         pose_vo = np.asarray(est.pose, float)
@@ -318,20 +322,25 @@ class Pipeline:
                               similarity=self.similarity)
 
     # ------------------------------------------------------------------ whole sequences
-    def run(self, seq, progress: Callable[[int, int], None] | None = None, max_frames: int | None = None
-            ) -> PipelineResult:
-        """Process a whole `vslam.sequence.Sequence`; wheel/gyro streams (if any) give the fallback motion."""
+    def run(self, seq, progress: Callable[[int, int], None] | None = None, max_frames: int | None = None,
+            odometry: Sequence[VOEstimate] | None = None) -> PipelineResult:
+        """Process a whole `vslam.sequence.Sequence`; wheel/gyro streams (if any) give the fallback motion.
+        `odometry`: the per-frame estimates of `odometry(seq)` of a pipeline with the same `vo` and `fusion`
+        config, used instead of running VO again (the result is the same)."""
         t_start = time.perf_counter()
         self.reset(seq.require_camera())
         n = len(seq) if max_frames is None else min(len(seq), max_frames)
         if n == 0:
             raise VslamError(f"{seq.root or seq.name}: the sequence has no frames")
-        priors = self._priors(seq, n)
+        if odometry is not None:
+            _check_odometry(seq, n, odometry)
+        priors = self._priors(seq, n) if odometry is None else None   # the priors only feed VO
         if self.recorder is not None and seq.groundtruth is not None:
             self.recorder.log_groundtruth(seq.groundtruth_planar()[:n])
         for fr in prefetch(seq, gray=True, stop=n):
             prior = None if priors is None or fr.index == 0 else priors(fr.index)
-            self.step(fr.image, fr.timestamp, prior, decode_seconds=fr.decode_seconds)
+            self.step(fr.image, fr.timestamp, prior, decode_seconds=fr.decode_seconds,
+                      vo=None if odometry is None else odometry[fr.index])
             if fr.error and self.recorder is not None:
                 self.recorder.log_text(f"frame {fr.index}: {fr.error}", "WARN")
             if progress is not None:
@@ -343,6 +352,15 @@ class Pipeline:
             self.recorder.replace_trajectory("slam", result.poses_slam)
             self._record_final_loops(result)
         return result
+
+    def odometry(self, seq, max_frames: int | None = None) -> list[VOEstimate]:
+        """Visual odometry alone over a whole sequence, as `run` computes it (same decoding, same wheel/gyro
+        fallback), for `run(seq, odometry=...)` of pipelines that differ only after VO."""
+        n = len(seq) if max_frames is None else min(len(seq), max_frames)
+        vo = VisualOdometry(seq.require_camera(), self.config.vo)
+        priors = self._priors(seq, n)
+        return [vo.process(fr.image, fr.timestamp, fallback=None if priors is None or fr.index == 0
+                           else priors(fr.index)) for fr in prefetch(seq, gray=True, stop=n)]
 
     def _priors(self, seq, n: int):
         """relative(i-1, i) of the fused wheel/gyro trajectory at the frame times, or None without streams."""
@@ -405,3 +423,14 @@ class Pipeline:
         acc = [l for l in loops if l.accepted]
         self.recorder.set_loops([seg(l) for l in acc if kept(l)], [seg(l) for l in acc if not kept(l)],
                                 [seg(l) for l in loops if not l.accepted] if candidates else None)
+
+
+def _check_odometry(seq, n: int, odometry: Sequence[VOEstimate]) -> None:
+    """Precomputed VO must cover the frames and belong to this sequence (same timestamps)."""
+    name = seq.root or seq.name
+    if len(odometry) < n:
+        raise VslamError(f"{name}: the precomputed odometry has {len(odometry)} frames, the run needs {n}")
+    for i in (0, n - 1):
+        if odometry[i].index != i or odometry[i].timestamp != float(seq.timestamps[i]):
+            raise VslamError(f"{name}: precomputed odometry frame {odometry[i].index} (t = {odometry[i].timestamp}) "
+                             f"does not match frame {i} (t = {float(seq.timestamps[i])}) of the sequence")
