@@ -42,3 +42,12 @@ def test_odometry_of_another_sequence_or_too_short_is_refused(seq):
     shifted = [replace(e, timestamp=e.timestamp + 1.0) for e in Pipeline(_config(4)).odometry(seq)]
     with pytest.raises(VslamError, match="does not match frame 0"):
         Pipeline(_config(4)).run(seq, odometry=shifted)
+
+
+def test_the_replay_reads_only_the_keyframes_images(seq, monkeypatch):
+    vo = Pipeline(_config(4)).odometry(seq)
+    read = []
+    image = type(seq).image
+    monkeypatch.setattr(type(seq), "image", lambda self, i, **kw: read.append(i) or image(self, i, **kw))
+    res = Pipeline(_config(4)).run(seq, odometry=vo)
+    assert sorted(read) == list(res.keyframes) and len(read) < len(seq) / 5

@@ -28,7 +28,7 @@ from vslam.pipeline.backend import backend_graph, floored
 from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import loop_pose
 from vslam.pipeline.outputs import write_outputs
-from vslam.pipeline.prefetch import prefetch
+from vslam.pipeline.prefetch import lazy_frames, prefetch
 from vslam.pipeline.recognizers import build_loop_detector
 
 
@@ -159,15 +159,19 @@ class Pipeline:
         kf = self.keyframes[k]
         return compose(self.kf_slam[k], between(self.poses_vo[kf], self.poses_vo[index]))
 
-    def step(self, image: np.ndarray | None, timestamp: float,
+    def step(self, image: np.ndarray | Callable[[], np.ndarray | None] | None, timestamp: float,
              prior: tuple[np.ndarray, np.ndarray] | None = None, decode_seconds: float = 0.0,
              vo: VOEstimate | None = None) -> FrameOutput:
         """Process one frame. `image` may be None (unreadable frame); `prior` is the wheel/gyro motion since the
         previous frame and its covariance (the fallback when vision fails); `vo`, this frame's estimate from an
-        earlier VO pass (`odometry`), replaces running VO."""
+        earlier VO pass (`odometry`), replaces running VO. With `vo`, `image` may be a loader (no arguments,
+        returns the image or None), called only if the frame becomes a keyframe or is recorded."""
         if self.camera is None:
             raise RuntimeError("call reset(camera) first (or give the camera to the constructor)")
         t_frame = time.perf_counter()
+        loaded = 0.0                   # seconds spent calling the loader, inside this step
+        if callable(image) and (vo is None or self.recorder is not None):
+            image, loaded = _load(image)
         index = len(self.timestamps)
         t0 = time.perf_counter()
         est = self.vo.process(image, timestamp, fallback=prior) if vo is None else vo
@@ -185,11 +189,13 @@ class Pipeline:
         t_loops = t_graph = 0.0
         found: list[LoopRecord] = []
         if keyframe:
+            if callable(image):
+                image, loaded = _load(image)
             t_loops, t_graph, found = self._keyframe_work(index, image)
         else:
             self._last_image = image   # kept (one frame) so that finish() can make the last frame a keyframe
         pose_slam = self.slam_pose(index)
-        timings = {"decode": decode_seconds, "vo": t_vo, "loops": t_loops, "graph": t_graph}
+        timings = {"decode": decode_seconds + loaded, "vo": t_vo, "loops": t_loops, "graph": t_graph}
         t0 = time.perf_counter()
         if self.recorder is not None:
             self._record(index, timestamp, image, est, pose_vo, pose_slam, found, timings)
@@ -301,7 +307,8 @@ class Pipeline:
         last = len(self.timestamps) - 1
         if last > 0 and self.keyframes[-1] != last:
             # the end of the run is a keyframe too: on a closed path it is where the closing loop is found
-            _, _, found = self._keyframe_work(last, self._last_image)
+            image = self._last_image
+            _, _, found = self._keyframe_work(last, _load(image)[0] if callable(image) else image)
             if self.recorder is not None:
                 for l in found:
                     if l.accepted:
@@ -337,7 +344,9 @@ class Pipeline:
         priors = self._priors(seq, n) if odometry is None else None   # the priors only feed VO
         if self.recorder is not None and seq.groundtruth is not None:
             self.recorder.log_groundtruth(seq.groundtruth_planar()[:n])
-        for fr in prefetch(seq, gray=True, stop=n):
+        # after a VO pass, a frame's pixels are read only if it becomes a keyframe (about one in 15)
+        frames = prefetch(seq, gray=True, stop=n) if odometry is None else lazy_frames(seq, stop=n)
+        for fr in frames:
             prior = None if priors is None or fr.index == 0 else priors(fr.index)
             self.step(fr.image, fr.timestamp, prior, decode_seconds=fr.decode_seconds,
                       vo=None if odometry is None else odometry[fr.index])
@@ -434,3 +443,9 @@ def _check_odometry(seq, n: int, odometry: Sequence[VOEstimate]) -> None:
         if odometry[i].index != i or odometry[i].timestamp != float(seq.timestamps[i]):
             raise VslamError(f"{name}: precomputed odometry frame {odometry[i].index} (t = {odometry[i].timestamp}) "
                              f"does not match frame {i} (t = {float(seq.timestamps[i])}) of the sequence")
+
+
+def _load(loader: Callable[[], np.ndarray | None]) -> tuple[np.ndarray | None, float]:
+    t0 = time.perf_counter()
+    image = loader()
+    return image, time.perf_counter() - t0
