@@ -35,3 +35,25 @@ def test_tables_put_the_papers_figures_beside_ours():
     assert f"{PAPER_TABLE_IV[4][0][0]:+.4g}" in iv and "ORB chain" in iv
     v = table_v({4: {"storage_mb": 28.0, "linear_s": 5.0, "indexed_s": 0.02}}, {"storage_mb": 900.0, "linear_s": 40.0})
     assert "28.59" in v and "1213.84" in v and "SIFT" in v
+
+
+class _Traj:
+    def __init__(self, mode, vo, slam):
+        self.mode, self.poses_vo, self.poses_slam = mode, vo, slam
+
+
+def test_figure_has_a_panel_per_mode_and_stays_small(tmp_path):
+    import matplotlib.image
+
+    from vslam.bench.paper_figure import paper_figure
+
+    t = np.linspace(0, 4 * np.pi, 7000)
+    gt = np.column_stack([10 * np.cos(t), 6 * np.sin(t), t + np.pi / 2])
+    rng = np.random.default_rng(0)
+    runs = [_Traj(m, gt + np.cumsum(rng.normal(0, 1e-3, gt.shape), 0), gt + rng.normal(0, 1e-3, gt.shape))
+            for m in range(1, 7)]
+    paper_figure(tmp_path / "p.png", "ours", gt, runs, gt * 1.02)
+    size = (tmp_path / "p.png").stat().st_size
+    img = matplotlib.image.imread(tmp_path / "p.png")
+    assert size < 300_000                                   # docs/img budget
+    assert img.shape[1] > 1.5 * img.shape[0]                # two rows of four panels: 6 modes, chain, close-up

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from odometry.shared.poses import between, compose
+from vslam.evaluation.plots import pyplot
 
 STRIDE = 4          # frames between plotted points: a 7154-frame path stays smooth and the PNG small
 END_FRAMES = 400    # frames before the end drawn in the close-up
@@ -20,9 +21,7 @@ def anchored(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
 
 def paper_figure(path: Path, renderer: str, gt: np.ndarray, runs: list, chain: np.ndarray) -> None:
     """Write the PNG: `runs` are the per-mode results (poses_vo, poses_slam, mode), `chain` the ORB chain poses."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     n = min(len(gt), *(len(r.poses_vo) for r in runs), len(chain))
     gt = gt[:n]
@@ -66,8 +65,9 @@ def _close_up(ax, gt: np.ndarray, slam: list[tuple[np.ndarray, str]], vo: np.nda
     tail = slice(max(0, len(gt) - END_FRAMES), len(gt))
     ax.plot(gt[tail, 0], gt[tail, 1], color="black", lw=2.5, alpha=0.3, label="ground truth")
     ax.plot(vo[tail, 0], vo[tail, 1], color="tab:blue", lw=0.9, label="VO")
-    for p, label in slam:
-        ax.plot(p[tail, 0], p[tail, 1], lw=0.9, label=label)
+    colours = pyplot().get_cmap("autumn")(np.linspace(0.0, 0.85, max(1, len(slam))))   # reds to yellows: not VO's blue
+    for (p, label), c in zip(slam, colours):
+        ax.plot(p[tail, 0], p[tail, 1], lw=0.9, color=c, label=label)
     reach = max([np.hypot(*(p[-1, :2] - end)) for p, _ in slam] + [np.hypot(*(vo[-1, :2] - end))])
     half = max(0.05, 1.4 * reach)
     ax.set_xlim(end[0] - half, end[0] + half)
