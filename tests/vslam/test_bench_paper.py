@@ -57,3 +57,22 @@ def test_figure_has_a_panel_per_mode_and_stays_small(tmp_path):
     img = matplotlib.image.imread(tmp_path / "p.png")
     assert size < 300_000                                   # docs/img budget
     assert img.shape[1] > 1.5 * img.shape[0]                # two rows of four panels: 6 modes, chain, close-up
+
+
+def test_vo_cache_reuses_a_pass_only_when_it_checks_out(tmp_path):
+    import pickle
+    from dataclasses import replace
+
+    from vslam.bench.paper_runs import vo_pass
+
+    simulate(SimConfig(floor="carpet", length=1.0, max_frames=40, width=320, height=240, focal=250.0), tmp_path / "s")
+    first = vo_pass(tmp_path / "s", tmp_path / "cache")
+    stored = list((tmp_path / "cache").glob("*.pkl"))
+    again = vo_pass(tmp_path / "s", tmp_path / "cache")
+    assert not first.reused and again.reused and len(stored) == 1
+    assert all(np.array_equal(a.pose, b.pose) for a, b in zip(first.estimates, again.estimates))
+    # a stale pass under the same key (say, from code the key missed) is recomputed, not reused
+    bad = replace(first, estimates=[replace(e, pose=e.pose + 1.0) for e in first.estimates])
+    stored[0].write_bytes(pickle.dumps(bad))
+    fresh = vo_pass(tmp_path / "s", tmp_path / "cache")
+    assert not fresh.reused and np.array_equal(fresh.estimates[-1].pose, first.estimates[-1].pose)

@@ -35,7 +35,8 @@ class TaskPool:
         if self._pool is not None:
             self._pool.shutdown(wait=exc[0] is None, cancel_futures=exc[0] is not None)
 
-    def submit(self, name: str, fn: Callable, *args) -> Future:
+    def submit(self, name: str, fn: Callable, *args, describe: Callable[[Any], str] | None = None) -> Future:
+        """Run fn(*args); as it finishes, the log gets its name, times and `describe(value)`."""
         out: Future = Future()
 
         def done(f: Future) -> None:
@@ -46,7 +47,9 @@ class TaskPool:
             value, wall, cpu = f.result()
             with self._lock:
                 self._times[name] = {"wall_s": wall, "cpu_s": cpu, "finished_at_s": time.perf_counter() - self.t0}
-            print(f"[{self._elapsed()}] {name}: {wall:.0f} s ({cpu:.0f} s CPU)", flush=True)
+            note = describe(value) if describe is not None else ""
+            print(f"[{self._elapsed()}] {name}: {wall:.0f} s ({cpu:.0f} s CPU)" + (f"; {note}" if note else ""),
+                  flush=True)
             out.set_result(value)
 
         if self._pool is None:
