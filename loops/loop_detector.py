@@ -25,7 +25,9 @@ from odometry.shared.camera import CameraModel
 from odometry.shared.config import Config, setting
 from odometry.shared.footprint import overlap_pairs
 
-# gate(candidate key, query key, verification) -> consistent with the motion between the two keyframes
+# gate(candidate key, query key, verification) -> consistent with the motion between the two keyframes. A gate may
+# also define resolve(query key, candidate keys that passed) -> the keys it keeps: the candidates of one query that
+# agree with each other (a query matching two places that cannot both be right is ambiguous, e.g. a periodic floor)
 MotionGate = Callable[[int, int, Verification], bool]
 
 
@@ -174,6 +176,12 @@ class LoopDetector:
                 if kept >= self.policy.shortlist:
                     break
         consistent = {i: self._consistent(i, key, v) for i, _, v in verified}
+        resolve = getattr(self.gate, "resolve", None)
+        if resolve is not None and key is not None:
+            gated = [i for i, c in consistent.items() if c]
+            kept_keys = set(resolve(key, [self._keys[i] for i in gated])) if gated else set()
+            for i in gated:
+                consistent[i] = self._keys[i] in kept_keys
         passing = [i for i, _, v in verified if self._passes(v) and consistent[i] is not False]
         out = []
         for i, score, v in verified:

@@ -14,7 +14,7 @@ from loops.recognition import Ranked, Verification
 from odometry.shared.camera import CameraModel
 from odometry.shared.footprint import overlap_pairs
 from odometry.shared.poses import between
-from vslam.app.loop_gate import MotionGate, PathDriftMotion
+from vslam.pipeline.motion_gate import ChainMotion, MotionGate
 
 
 class SamePlace:
@@ -111,7 +111,7 @@ class FixedLoop(AcceptAll):
 def test_the_motion_gate_rejects_a_loop_that_contradicts_the_odometry():
     cam = camera()
     odo = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.0, 0.0]])   # out 0.3 m and back
-    gate = MotionGate(cam, PathDriftMotion(odo))
+    gate = MotionGate.for_camera(cam, ChainMotion(odo))
     v_true = FixedLoop(cam, np.zeros(2)).verify(None, None)          # the same place: agrees with odometry
     v_false = FixedLoop(cam, np.array([0.4, 0.0])).verify(None, None)  # a look-alike 0.4 m away
     assert gate(0, 2, v_true)
@@ -157,6 +157,6 @@ def test_across_an_unmeasured_step_the_gate_leaves_the_decision_to_appearance():
     cam = camera()
     odo = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.0, 0.0]])
     v_false = FixedLoop(cam, np.array([0.4, 0.0])).verify(None, None)
-    assert not MotionGate(cam, PathDriftMotion(odo))(0, 2, v_false)
+    assert not MotionGate.for_camera(cam, ChainMotion(odo))(0, 2, v_false)
     lost = np.array([False, True, False])     # VO lost frame 1: the motion 0 -> 2 is unknown
-    assert MotionGate(cam, PathDriftMotion(odo, unknown=lost))(0, 2, v_false)
+    assert MotionGate.for_camera(cam, ChainMotion(odo, unknown=lost))(0, 2, v_false)

@@ -1,4 +1,5 @@
 """The ground-texture simulator: determinism, geometric agreement of images / ground truth / odometry, floors."""
+import argparse
 import hashlib
 import math
 from dataclasses import replace
@@ -8,6 +9,7 @@ import numpy as np
 import pytest
 
 from odometry.shared.poses import integrate_arcs, transform_points
+from vslam.cli.cmd_simulate import add_arguments, config_from_args
 from vslam.cli.main import main
 from vslam.errors import ImageReadError
 from vslam.io import open_sequence
@@ -196,3 +198,23 @@ def test_dropped_runs_and_exposure_jumps(tmp_path):
     assert res.dropped > 0 and np.all((gaps == 0) | (gaps >= 4) | (gaps == res.dropped % 4))
     mean = np.array([seq.image(i, gray=True).mean() for i in range(len(seq))])
     assert np.max(np.abs(np.diff(np.log(mean)))) > 0.2                 # brightness steps between frames
+
+
+def test_cli_simulate_has_the_regime_options(tmp_path):
+    """`vslam simulate` reaches lanes, scene scale, dropped runs and exposure jumps (the SimConfig options)."""
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    a = p.parse_args([str(tmp_path / "x"), "--trajectory", "lanes", "--lanes", "4", "--lane-spacing", "27",
+                      "--camera-height", "40", "--scene-scale", "80", "--dropped-frames", "0.1", "--dropped-run", "8",
+                      "--exposure-jumps", "0.2", "--exposure-jump-size", "0.3"])
+    cfg = config_from_args(a)
+    assert (cfg.lanes, cfg.lane_spacing, cfg.scene_scale, cfg.camera_height) == (4, 27.0, 80.0, 40.0)
+    assert (cfg.effects.dropped_run, cfg.effects.exposure_jumps, cfg.effects.exposure_jump_size) == (8, 0.2, 0.3)
+    assert config_from_args(p.parse_args([str(tmp_path / "y")])).scene_scale == 1.0      # default: unchanged
+    out = tmp_path / "lanes"
+    assert main(["simulate", str(out), "--trajectory", "lanes", "--lanes", "2", "--size", "160x120",
+                 "--camera-height", "40", "--scene-scale", "80", "--speed", "14", "--fps", "0.2", "--length", "200",
+                 "--turn-radius", "80", "--no-distortion", "--quiet"]) == 0
+    gt = open_sequence(out).groundtruth_planar()
+    assert np.any(np.isclose(np.cos(gt[:, 2]), -1.0, atol=1e-6))      # the second lane is flown backwards
+    assert main(["simulate", str(tmp_path / "bad"), "--dropped-run", "0", "--quiet"]) == 2

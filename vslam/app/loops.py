@@ -7,7 +7,8 @@ OUT/summary.json.
 Recent keyframes are excluded by time (`exclude_seconds`) and, when the sequence has odometry (its wheel
 odometry, our visual odometry, or a given TUM trajectory) and a downward camera, by footprint: a keyframe is a
 candidate only once the camera has left its floor footprint. With odometry, verified candidates must also agree
-with the motion between the two keyframes (vslam.app.loop_gate). `appearance_only` turns both off.
+with the motion between the two keyframes (vslam.pipeline.motion_gate, the gate of the SLAM pipeline too).
+`appearance_only` turns both off.
 """
 from __future__ import annotations
 
@@ -27,12 +28,12 @@ from odometry.fusion import FusionConfig
 from odometry.shared.atomic_io import atomic_write_text
 from odometry.shared.tum import read_tum
 from odometry.vo import VOConfig, VOStatus, run_visual_odometry
-from vslam.app.loop_gate import MotionGate, MotionGateParams, PathDriftMotion
 from vslam.app.odometry import fuse_sequence_odometry
 from vslam.app.outdir import LOOPS_OUTPUTS, prepare_out_dir
 from vslam.errors import VslamError
 from vslam.io import open_sequence
 from vslam.io.bad_frames import check_mode
+from vslam.pipeline.motion_gate import ChainMotion, MotionGate, MotionGateParams
 from vslam.sequence import Sequence, Trajectory
 
 GEOMETRIES = ("auto", "floor", "general")
@@ -58,7 +59,7 @@ def _tum_motion(seq: Sequence, path: Path, gate: MotionGateParams) -> MotionSour
     if len(missing):
         raise VslamError(f"{path}: field 'timestamp': no pose at frame {int(missing[0])} "
                          f"(t = {float(seq.timestamps[missing[0]]):.6f}, outside the trajectory's time span)")
-    return MotionSource(f"tum:{path}", poses, PathDriftMotion(poses, gate))
+    return MotionSource(f"tum:{path}", poses, ChainMotion(poses, gate.drift))
 
 
 def motion_source(seq: Sequence, odometry: str, gate: MotionGateParams) -> MotionSource | None:
@@ -80,7 +81,7 @@ def motion_source(seq: Sequence, odometry: str, gate: MotionGateParams) -> Motio
         return None
     traj = run_visual_odometry(seq.camera, seq.timestamps, lambda i: seq.image(i, gray=True), VOConfig())
     lost = np.array([s == VOStatus.LOST for s in traj.status])   # motion not measured: the gate cannot judge
-    return MotionSource("vo", traj.poses, PathDriftMotion(traj.poses, gate, unknown=lost))
+    return MotionSource("vo", traj.poses, ChainMotion(traj.poses, gate.drift, unknown=lost))
 
 
 @dataclass(frozen=True)
@@ -128,7 +129,7 @@ def detect_sequence_loops(sequence: str | Path, out: str | Path, mode: int = 4, 
     dbp = DatabaseParams(shortlist=shortlist, exclude_recent=exclude_recent, confirmations=confirmations,
                          exclude_seconds=exclude_seconds, exclude_unleft=motion is not None)
     footprint = seq.camera if (motion is not None and downward) else None
-    gate_fn = MotionGate(seq.camera, motion.relative, gate_params) if footprint is not None else None
+    gate_fn = MotionGate.for_camera(seq.camera, motion.relative, gate_params) if footprint is not None else None
     indices = list(range(0, len(seq), every))
     warnings: list[str] = []
 

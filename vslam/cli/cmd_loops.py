@@ -49,8 +49,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(a: argparse.Namespace) -> int:
-    from vslam.app.loop_gate import MotionGateParams
     from vslam.app.loops import detect_sequence_loops  # on use: keeps `vslam --help` fast
+    from vslam.pipeline.motion_gate import MotionGateParams
 
     bar = Progress(0, "loops", enabled=None if not a.quiet else False)
     res = detect_sequence_loops(a.sequence, a.out, mode=a.mode, model=a.model, threshold=a.threshold, every=a.every,

@@ -42,6 +42,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera-height", type=float, default=0.5, help="metres above the floor (default 0.5)")
     p.add_argument("--no-distortion", action="store_true", help="ideal pinhole lens")
     p.add_argument("--turn-radius", type=float, default=1.0)
+    p.add_argument("--lanes", type=int, default=3,
+                   help="--trajectory lanes: number of parallel lanes flown in alternating directions (default 3)")
+    p.add_argument("--lane-spacing", type=float, default=None, metavar="M",
+                   help="--trajectory lanes: metres between lanes (default 2/3 of the footprint width)")
+    p.add_argument("--scene-scale", type=float, default=None, metavar="K",
+                   help="floor size relative to its photographs (default 1: their physical size). Camera height "
+                        "/ 0.5 keeps the 0.5 m look at any height: --camera-height 40 --scene-scale 80 is an "
+                        "aerial-like scene")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--color", action="store_true", help="colour images (default greyscale, like most floor cameras)")
     p.add_argument("--image-format", default="jpg", choices=["jpg", "png"])
@@ -55,7 +63,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     fx.add_argument("--dropped-frames", type=float, default=0.0, metavar="P", help="probability a frame is dropped")
     fx.add_argument("--corrupt-frames", type=float, default=0.0, metavar="P",
                     help="probability a frame is written corrupt (undecodable)")
+    fx.add_argument("--dropped-run", type=int, default=1, metavar="N",
+                    help="frames lost at each drop: runs of N dropped frames (default 1)")
     fx.add_argument("--exposure", type=float, default=0.008, help="exposure time in seconds (motion blur)")
+    fx.add_argument("--exposure-jumps", type=float, default=0.0, metavar="P",
+                    help="probability per frame of an auto-exposure step (the image brighter or darker from then on)")
+    fx.add_argument("--exposure-jump-size", type=float, default=0.5, metavar="S",
+                    help="auto-exposure step: log gain uniform in +-S (default 0.5)")
     sn = p.add_argument_group("wheel odometry and gyro")
     sn.add_argument("--sensor-noise", type=float, default=1.0, metavar="K",
                     help="scale every wheel/gyro error (0 = perfect sensors; default 1)")
@@ -70,10 +84,20 @@ def config_from_args(a: argparse.Namespace):
     else:
         effects = Effects(motion_blur=not a.no_blur, lighting=not a.no_lighting, vignetting=not a.no_vignetting,
                           sensor_noise=not a.no_noise, wobble=not a.no_wobble)
-    effects = replace(effects, dropped_frames=a.dropped_frames, corrupt_frames=a.corrupt_frames, exposure=a.exposure)
-    for name, v in (("--dropped-frames", a.dropped_frames), ("--corrupt-frames", a.corrupt_frames)):
+    for name, v in (("--dropped-frames", a.dropped_frames), ("--corrupt-frames", a.corrupt_frames),
+                    ("--exposure-jumps", a.exposure_jumps)):
         if not 0.0 <= v <= 1.0:
             raise VslamError(f"{name} must be a probability in [0, 1], got {v}")
+    if a.dropped_run < 1 or a.lanes < 1:
+        raise VslamError("--dropped-run and --lanes must be at least 1")
+    if a.exposure_jump_size < 0:
+        raise VslamError(f"--exposure-jump-size must be >= 0, got {a.exposure_jump_size}")
+    for name, v in (("--lane-spacing", a.lane_spacing), ("--scene-scale", a.scene_scale)):
+        if v is not None and v <= 0:
+            raise VslamError(f"{name} must be positive, got {v}")
+    effects = replace(effects, dropped_frames=a.dropped_frames, corrupt_frames=a.corrupt_frames, exposure=a.exposure,
+                      dropped_run=a.dropped_run, exposure_jumps=a.exposure_jumps,
+                      exposure_jump_size=a.exposure_jump_size)
     length = a.length
     if length is None:
         length = 10.0 if a.frames is None else length_for_frames(a.frames, a.fps, a.speed)
@@ -86,7 +110,9 @@ def config_from_args(a: argparse.Namespace):
                      camera_height=a.camera_height,
                      distortion=(0.0,) * 5 if a.no_distortion else SimConfig().distortion,
                      turn_radius=a.turn_radius, seed=a.seed, gray=not a.color, image_format=a.image_format,
-                     effects=effects, sensor_noise=SensorNoise().scaled(a.sensor_noise), max_frames=a.frames)
+                     effects=effects, sensor_noise=SensorNoise().scaled(a.sensor_noise), max_frames=a.frames,
+                     lanes=a.lanes, lane_spacing=a.lane_spacing,
+                     scene_scale=a.scene_scale if a.scene_scale is not None else 1.0)
 
 
 def run(a: argparse.Namespace) -> int:

@@ -22,6 +22,7 @@ from loops.loop_detector import DatabaseParams
 from odometry.fusion import FusionConfig
 from odometry.shared.config import Config, ConfigError, setting
 from odometry.vo import VOConfig
+from vslam.pipeline.motion_gate import MotionGateParams
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,9 @@ class LoopConfig(Config):
     pose_pixel_sigma: float = setting(1.0, range="(0, inf)", unit="px",
                                       doc="pixel noise of decoded keypoints (coarse coordinate coding)")
     vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
+    # a verified loop must agree with the visual odometry between its two keyframes (drift-aware; the loop's floor
+    # fit above is the one judged, and the one given to the graph)
+    gate: MotionGateParams = field(default_factory=MotionGateParams)
 
     def check(self) -> None:
         if self.recognizer == "horizon":

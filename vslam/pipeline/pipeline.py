@@ -26,7 +26,8 @@ from odometry.vo import VisualOdometry, VOEstimate, VOStatus
 from vslam.errors import VslamError
 from vslam.pipeline.backend import backend_graph, floored
 from vslam.pipeline.config import PipelineConfig
-from vslam.pipeline.loop_pose import loop_pose
+from vslam.pipeline.loop_pose import LoopPose, loop_pose
+from vslam.pipeline.motion_gate import ChainMotion, MotionGate
 from vslam.pipeline.outputs import write_outputs
 from vslam.pipeline.prefetch import lazy_frames, prefetch
 from vslam.pipeline.recognizers import build_loop_detector
@@ -48,6 +49,7 @@ class LoopRecord:
     pose_inliers: int = 0
     loop_index: int | None = None     # index among the loops given to the back end
     inlier: bool | None = None        # the back end's verdict (None: not given to it)
+    motion_consistent: bool | None = None   # the motion gate's verdict (None: gate off, or not verified)
 
 
 @dataclass
@@ -95,6 +97,7 @@ class PipelineResult:
                 "loops_verified": len(self.loops), "loops_accepted": len(acc), "loops_kept": len(kept),
                 "loops_rejected_by_backend": sum(1 for l in acc if l.inlier is False),
                 "loops_without_pose": sum(1 for l in acc if l.delta is None),
+                "loops_rejected_by_motion": sum(1 for l in self.loops if l.motion_consistent is False),
                 "median_ms": tm, "wall_seconds": self.wall_seconds,
                 "frames_per_second": n / self.wall_seconds if self.wall_seconds > 0 else float("nan"),
                 "descriptor_bytes_mean": float(np.mean(self.descriptor_bytes)) if len(self.descriptor_bytes) else 0.0,
@@ -122,15 +125,18 @@ class Pipeline:
         cfg = self.config
         self.camera = camera
         self.vo = VisualOdometry(camera, cfg.vo)
-        self.loop_detector = build_loop_detector(cfg, camera)
-        self.graph = backend_graph(cfg.graph, cfg.incremental)
         self.rng = np.random.default_rng(cfg.seed)
+        self.gate = MotionGate(self._loop_fit, self._keyframe_motion, cfg.loops.gate) if cfg.loops.gate.enabled \
+            else None
+        self.loop_detector = build_loop_detector(cfg, camera, self.gate)
+        self.graph = backend_graph(cfg.graph, cfg.incremental)
         self.timestamps: list[float] = []
         self.poses_vo: list[np.ndarray] = []
         self.vo_status: list[str] = []
         self.vo_inliers: list[int] = []
         self.keyframes: list[int] = []
         self.kf_slam: list[np.ndarray] = []     # current estimate of each keyframe
+        self.kf_step_cov: list[np.ndarray] = []  # VO covariance of the step from the previous keyframe
         self.loops: list[LoopRecord] = []
         self.graph_loops: list[LoopRecord] = []
         self.descriptor_bytes: list[int] = []
@@ -222,18 +228,19 @@ class Pipeline:
             cov = self._acc_cov + np.diag([1e-10, 1e-10, 1e-12])    # never singular (e.g. standing still)
             self.keyframes.append(index)
             self.kf_slam.append(guess)
+            self.kf_step_cov.append(floored(cov))
             self.graph.add_node(index, guess)
             self.graph.add_odometry(prev, index, between(self.poses_vo[prev], self.poses_vo[index]), floored(cov))
         else:
             self.keyframes.append(index)
             self.kf_slam.append(self.poses_vo[index].copy())
+            self.kf_step_cov.append(np.zeros((3, 3)))
             self.graph.add_node(index, self.poses_vo[index])
         self._acc_delta = np.zeros(3)
         self._acc_cov = np.zeros((3, 3))
         self._since_kf = 0
 
     def _detect_loops(self, index: int, image: np.ndarray) -> list[LoopRecord]:
-        lc = self.config.loops
         detector = self.loop_detector
         obs = detector.recognizer.observe(image)   # cdvs: the decoded compact bytes, as a robot would store them
         self.descriptor_bytes.append(int(obs.nbytes))
@@ -251,9 +258,10 @@ class Pipeline:
                              local_score=float(c.score),
                              probability=float("nan") if v.probability is None else float(v.probability),
                              accepted=bool(c.accepted), n_inliers=int(v.n_inliers))
+            rec.motion_consistent = c.motion_consistent
             if rec.accepted:
-                lp = loop_pose(self.camera, v.inliers_query, v.inliers_candidate, lc.pose_threshold_px,
-                               lc.min_pose_inliers, lc.pose_pixel_sigma, self.rng)
+                judged = None if self.gate is None else self.gate.results.get((rec.match_frame, index))
+                lp = judged.fit if judged is not None else self._loop_fit(v)
                 if lp is not None:
                     rec.delta, rec.covariance, rec.pose_inliers = lp.delta, lp.covariance, lp.n_inliers
                     rec.loop_index = self.graph.add_loop(rec.match_frame, rec.query_frame, lp.delta,
@@ -263,6 +271,22 @@ class Pipeline:
             out.append(rec)
         self.loops.extend(out)
         return out
+
+    def _loop_fit(self, v) -> LoopPose | None:
+        """The loop's floor motion from its verified pixel pairs (None: too few pairs on one rigid motion)."""
+        lc = self.config.loops
+        return loop_pose(self.camera, v.inliers_query, v.inliers_candidate, lc.pose_threshold_px,
+                         lc.min_pose_inliers, lc.pose_pixel_sigma, self.rng)
+
+    def _keyframe_motion(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """VO motion from keyframe `a` to keyframe `b` (frame ids) and its drift-aware covariance: the chain of
+        keyframes in between (the motion gate's odometry)."""
+        ia = int(np.searchsorted(self.keyframes, a))
+        ib = int(np.searchsorted(self.keyframes, b))
+        kfs = self.keyframes[ia:ib + 1]
+        chain = ChainMotion(np.array([self.poses_vo[k] for k in kfs]), self.config.loops.gate.drift, keys=kfs,
+                            step_cov=np.array(self.kf_step_cov[ia:ib + 1]))
+        return chain(a, b)
 
     def _maybe_optimize(self, force: bool = False) -> None:
         """Batch: re-solve after `optimize_every` new loops (and at the end). Incremental: an iSAM2 update whenever

@@ -11,7 +11,7 @@ from loops.cdvs.database import cdvs_loop_detector
 from loops.cdvs.model import LoopModel
 from loops.cdvs.params import CdvsParams
 from loops.geometry import GeometryModel
-from loops.loop_detector import LoopDetector
+from loops.loop_detector import LoopDetector, MotionGate
 from loops.vocab.floor_vocabulary import load_floor_vocabulary
 from loops.vocab.recognizer import VerifyParams, VocabRecognizer, VocabVerifier
 from odometry.shared.camera import CameraModel
@@ -30,28 +30,32 @@ def default_loop_model() -> LoopModel | None:
         return None
 
 
-def cdvs_detector(config: PipelineConfig, camera: CameraModel | None = None) -> LoopDetector:
+def cdvs_detector(config: PipelineConfig, camera: CameraModel | None = None,
+                  gate: MotionGate | None = None) -> LoopDetector:
     lc = config.loops
     model = LoopModel.load(lc.model) if lc.model else default_loop_model()
     params = CdvsParams.floor(lc.mode) if lc.floor_preset else CdvsParams.for_mode(lc.mode)
-    return cdvs_loop_detector(lc.mode, params, config.database_params(), model=model, camera=camera)
+    return cdvs_loop_detector(lc.mode, params, config.database_params(), model=model, camera=camera, gate=gate)
 
 
-def vocab_detector(config: PipelineConfig, camera: CameraModel | None = None) -> LoopDetector:
+def vocab_detector(config: PipelineConfig, camera: CameraModel | None = None,
+                   gate: MotionGate | None = None) -> LoopDetector:
     vc = config.loops.vocab
     tree, params = load_floor_vocabulary(vc.vocabulary)
     params = dataclasses.replace(params, n_features=vc.n_features, min_shared_words=vc.min_shared_words)
     verify = VerifyParams(ratio=vc.ratio, min_inliers=vc.min_inliers, threshold_px=vc.threshold_px,
                           geometry=GeometryModel.SIMILARITY, scale_range=FLOOR_SCALE_RANGE)
-    return LoopDetector(VocabRecognizer(tree, params), VocabVerifier(verify), config.database_params(), camera=camera)
+    return LoopDetector(VocabRecognizer(tree, params), VocabVerifier(verify), config.database_params(), camera=camera,
+                        gate=gate)
 
 
-def build_loop_detector(config: PipelineConfig, camera: CameraModel | None = None) -> LoopDetector | None:
+def build_loop_detector(config: PipelineConfig, camera: CameraModel | None = None,
+                        gate: MotionGate | None = None) -> LoopDetector | None:
     """The configured loop detector (None when loop detection is disabled). With the downward `camera`, keyframes
     added with their VO pose become candidates only once the camera has left their footprint (on top of the
-    configured exclusion; loops.loop_detector)."""
+    configured exclusion; loops.loop_detector); `gate` checks verified candidates against the motion."""
     if not config.loops.enabled:
         return None
     if config.loops.recognizer == "vocab":
-        return vocab_detector(config, camera)
-    return cdvs_detector(config, camera)
+        return vocab_detector(config, camera, gate)
+    return cdvs_detector(config, camera, gate)
