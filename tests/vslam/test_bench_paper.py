@@ -76,3 +76,17 @@ def test_vo_cache_reuses_a_pass_only_when_it_checks_out(tmp_path):
     stored[0].write_bytes(pickle.dumps(bad))
     fresh = vo_pass(tmp_path / "s", tmp_path / "cache")
     assert not fresh.reused and np.array_equal(fresh.estimates[-1].pose, first.estimates[-1].pose)
+
+
+def test_task_pool_hands_back_values_failures_and_times():
+    import pytest
+
+    from vslam.bench.paper_pool import TaskPool
+
+    with TaskPool(1) as pool:
+        ok = pool.submit("sum", sum, [1, 2, 3], describe=lambda v: f"got {v}")
+        bad = pool.submit("div", divmod, 1, 0)
+        times = pool.report()
+    assert ok.result() == 6 and set(times) == {"sum"} and times["sum"]["wall_s"] >= 0
+    with pytest.raises(ZeroDivisionError):
+        bad.result()

@@ -40,6 +40,9 @@ class TaskPool:
         out: Future = Future()
 
         def done(f: Future) -> None:
+            if f.cancelled():          # the pool was shut down (an interrupt, another task's failure)
+                out.cancel()
+                return
             if f.exception() is not None:
                 print(f"[{self._elapsed()}] {name}: FAILED ({f.exception()!r})", flush=True)
                 out.set_exception(f.exception())
