@@ -1,9 +1,17 @@
 """The pieces of `vslam bench paper` that can fail quietly: the naive ORB chain baseline and the paper's tables."""
 from __future__ import annotations
 
+import pickle
+from dataclasses import replace
+
+import matplotlib.image
 import numpy as np
+import pytest
 
 from vslam.bench.baseline_orb_chain import naive_orb_chain
+from vslam.bench.paper_figure import paper_figure
+from vslam.bench.paper_pool import TaskPool
+from vslam.bench.paper_runs import vo_pass
 from vslam.bench.paper_tables import PAPER_TABLE_IV, table_iv, table_v
 from vslam.io import open_sequence
 from vslam.sim import SimConfig, simulate
@@ -43,10 +51,6 @@ class _Traj:
 
 
 def test_figure_has_a_panel_per_mode_and_stays_small(tmp_path):
-    import matplotlib.image
-
-    from vslam.bench.paper_figure import paper_figure
-
     t = np.linspace(0, 4 * np.pi, 7000)
     gt = np.column_stack([10 * np.cos(t), 6 * np.sin(t), t + np.pi / 2])
     rng = np.random.default_rng(0)
@@ -60,11 +64,6 @@ def test_figure_has_a_panel_per_mode_and_stays_small(tmp_path):
 
 
 def test_vo_cache_reuses_a_pass_only_when_it_checks_out(tmp_path):
-    import pickle
-    from dataclasses import replace
-
-    from vslam.bench.paper_runs import vo_pass
-
     simulate(SimConfig(floor="carpet", length=1.0, max_frames=40, width=320, height=240, focal=250.0), tmp_path / "s")
     first = vo_pass(tmp_path / "s", tmp_path / "cache")
     stored = list((tmp_path / "cache").glob("*.pkl"))
@@ -79,10 +78,6 @@ def test_vo_cache_reuses_a_pass_only_when_it_checks_out(tmp_path):
 
 
 def test_task_pool_hands_back_values_failures_and_times():
-    import pytest
-
-    from vslam.bench.paper_pool import TaskPool
-
     with TaskPool(1) as pool:
         ok = pool.submit("sum", sum, [1, 2, 3], describe=lambda v: f"got {v}")
         bad = pool.submit("div", divmod, 1, 0)
