@@ -18,23 +18,25 @@ import importlib.util
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from concurrent.futures import as_completed
 from pathlib import Path
 
-import cv2
-import numpy as np
-
-from loops.cdvs import MODES, CdvsParams, LoopDatabase, decode, encode, match
-from odometry.shared.poses import between, compose
-from vslam.bench.baseline_orb_chain import naive_orb_chain, planar_ate
+from loops.cdvs import MODES
+from vslam.bench.paper_figure import paper_figure
+from vslam.bench.paper_pool import TaskPool
+from vslam.bench.paper_runs import (
+    baseline_chain,
+    cdvs_storage_and_time,
+    run_mode,
+    sift_storage_and_time,
+    summary,
+    table_v_frames,
+    vo_pass,
+)
 from vslam.bench.paper_tables import PAPER_TABLE_IV, PAPER_TABLE_V, table_iv, table_v
 from vslam.bench.results import BenchResult, write_json
-from vslam.bench.timing import median
-from vslam.evaluation.metrics import start_to_end_error
-from vslam.evaluation.run_eval import evaluate_result
 from vslam.io import open_sequence
 from vslam.paths import shared_data_dir
-from vslam.pipeline import Pipeline, PipelineConfig
 from vslam.sim import SimConfig, simulate
 
 PAPER_FRAMES = 7154
@@ -52,23 +54,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--table-v-frames", type=int, default=0,
                    help="frames encoded for Table V (storage, linear matching time, SIFT); 0 = every frame. Fewer "
                         "frames: storage and time are scaled to --frames, and the table says so")
+    p.add_argument("--sift-frames", type=int, default=None,
+                   help="frames SIFT describes for Table V (default: --table-v-frames); scaled the same way")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--jobs", type=int, default=2,
+                   help="worker processes (default 2: this machine's cores); the measured units are independent, "
+                        "so their figures do not depend on it, only the wall time does")
+    p.add_argument("--sequences", default=None,
+                   help="folder of the rendered sequences, reused when present (default: OUT/sequences); "
+                        "both renderers are deterministic for a given --frames, --length and --seed")
+    p.add_argument("--vo-cache", default=None,
+                   help="folder keeping each sequence's VO pass between runs, keyed by the VO code, its config and the "
+                        "sequence (a pass is reused only under the same key and after a check on its first frames)")
+    p.add_argument("--figure-dir", default=None, help="where the PNGs go (default: OUT; docs/img for the docs)")
     p.add_argument("--quick", action="store_true", help="700 frames over 11 m, modes 2 and 4, 200 Table V frames")
-
-
-@dataclass(frozen=True)
-class ModeRun:
-    mode: int
-    vo: dict                # start_to_end_error of VO (est end relative to start, and its error vs ground truth)
-    slam: dict
-    vo_ate_m: float
-    slam_ate_m: float
-    accepted: int           # loops accepted by the detector
-    kept: int               # loops kept by the back end
-    false_kept: int         # kept loops whose footprints do not overlap (ground truth)
-    fps: float
-    poses_vo: np.ndarray
-    poses_slam: np.ndarray
 
 
 # ---------------------------------------------------------------------------------------------------- sequences
@@ -112,159 +111,77 @@ def _loop_size(tool: Path, length: float, laps: int) -> tuple[float, float]:
     return 3.0 * k, 2.0 * k
 
 
-# ---------------------------------------------------------------------------------------------------- table IV
-def _run_mode(seq, mode: int, out: Path) -> ModeRun:
-    base = PipelineConfig()
-    cfg = base.replace(loops=base.loops.replace(mode=mode), recording=base.recording.replace(enabled=False))
-    t0 = time.perf_counter()
-    res = Pipeline(cfg).run(seq)
-    fps = len(res.timestamps) / (time.perf_counter() - t0)
-    res.write(out, sequence=seq, plots=False)
-    ev = evaluate_result(res, seq)
-    kept = ev.get("loops", {}).get("kept_by_back_end", {})
-    return ModeRun(mode, ev["vo"]["start_to_end"], ev["slam"]["start_to_end"], ev["vo"]["ape_m"]["rmse"],
-                   ev["slam"]["ape_m"]["rmse"], int(sum(bool(l.accepted) for l in res.loops)),
-                   int(kept.get("reported", 0)), int(kept.get("false_positives", 0)), fps, res.poses_vo, res.poses_slam)
-
-
-def _baseline_chain(seq) -> dict:
-    gt = seq.groundtruth_planar()
-    poses, _, _ = naive_orb_chain(seq, seq.require_camera())
-    gt = gt[: len(poses)]
-    ok = ~np.isnan(gt[:, 0])
-    return {"start_to_end": start_to_end_error(poses, gt), "ate_m": planar_ate(poses[ok], gt[ok]), "poses": poses}
-
-
-# ---------------------------------------------------------------------------------------------------- table V
-def _table_v_frames(n_seq: int, n: int) -> np.ndarray:
-    return np.arange(n_seq) if n <= 0 or n >= n_seq else np.unique(np.linspace(0, n_seq - 1, n).round().astype(int))
-
-
-def _cdvs_storage_and_time(seq, frames: np.ndarray, mode: int, scale: float) -> dict:
-    """Bytes of every descriptor, the linear match of the last against all previous, and the indexed query."""
-    params = CdvsParams.floor(mode)
-    blobs = [encode(seq.image(int(i), gray=True), mode, params) for i in frames]
-    descs = [decode(b) for b in blobs]
-    last, previous = descs[-1], descs[:-1]
-    t0 = time.perf_counter()
-    for d in previous:
-        match(last, d, params.matching)
-    linear = time.perf_counter() - t0
-    db = LoopDatabase(mode, params)
-    for k, d in enumerate(previous):
-        db.add(int(frames[k]), d)
-    times = []
-    for _ in range(3):
-        t0 = time.perf_counter()
-        db.query(last, int(frames[-1]))
-        times.append(time.perf_counter() - t0)
-    return {"storage_mb": sum(map(len, blobs)) * scale / 1e6, "linear_s": linear * scale,
-            "indexed_s": median(times), "indexed_database": len(previous), "mean_bytes": float(np.mean([len(b) for b in blobs]))}
-
-
-def _sift_storage_and_time(seq, frames: np.ndarray, scale: float) -> dict:
-    """OpenCV SIFT on the same frames: 128 float32 + a keypoint (x, y, size, angle) per feature; ratio-test
-    matching of the last image against all previous (brute force, as the paper's SIFT baseline)."""
-    sift = cv2.SIFT_create()
-    descs = []
-    for i in frames:
-        _, d = sift.detectAndCompute(seq.image(int(i), gray=True), None)
-        descs.append(np.zeros((0, 128), np.float32) if d is None else d)
-    storage = sum(d.shape[0] * (128 * 4 + 4 * 4) for d in descs)
-    bf = cv2.BFMatcher(cv2.NORM_L2)
-    last = descs[-1]
-    t0 = time.perf_counter()
-    for d in descs[:-1]:
-        if len(d) >= 2 and len(last) >= 2:
-            pairs = bf.knnMatch(last, d, k=2)
-            sum(1 for p in pairs if len(p) == 2 and p[0].distance < 0.8 * p[1].distance)
-    return {"storage_mb": storage * scale / 1e6, "linear_s": (time.perf_counter() - t0) * scale}
-
-
-# ---------------------------------------------------------------------------------------------------- figure
-def _anchored(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """Estimated poses started at the first ground-truth pose (as the paper draws its paths on the blueprint)."""
-    return compose(gt[0], between(est[0], est))
-
-
-def _figure(path: Path, renderer: str, gt: np.ndarray, runs: list[ModeRun], chain: np.ndarray) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(13, 6), constrained_layout=True)
-    for ax, title, key in ((axes[0], "visual odometry (Fig. 7)", "vo"), (axes[1], "VSLAM (Fig. 8)", "slam")):
-        ax.plot(gt[:, 0], gt[:, 1], color="black", lw=2.5, alpha=0.35, label="ground truth")
-        if key == "vo":   # our VO does not depend on the mode: one curve
-            for p, kw in ((chain, dict(color="grey", ls="--", label="ORB + affine chain")),
-                          (runs[0].poses_vo, dict(label="our VO (every mode)"))):
-                p = _anchored(p, gt)
-                ax.plot(p[:, 0], p[:, 1], lw=1, **kw)
-        else:
-            for r in runs:
-                p = _anchored(r.poses_slam, gt)
-                ax.plot(p[:, 0], p[:, 1], lw=1, label=f"mode {r.mode}")
-        ax.set_title(f"{renderer}: {title}")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.set_aspect("equal")
-        ax.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 # ---------------------------------------------------------------------------------------------------- run
-def _one_renderer(args, renderer: str, out: Path) -> dict:
-    cache = out / "sequences"
-    make = _our_sequence if renderer == "ours" else _independent_sequence
-    seq_path = make(cache, args.frames, args.length, args.seed)
-    seq = open_sequence(seq_path)
-    runs = []
-    for m in args.modes:
-        print(f"[{renderer}] pipeline, mode {m} ...", flush=True)
-        runs.append(_run_mode(seq, m, out / renderer / f"mode{m}"))
-        r = runs[-1]
-        print(f"  SLAM ATE {r.slam_ate_m:.3f} m, loops accepted {r.accepted} kept {r.kept} (false {r.false_kept}), "
-              f"{r.fps:.1f} frames/s", flush=True)
-    print(f"[{renderer}] ORB + estimateAffinePartial2D chain ...", flush=True)
-    chain = _baseline_chain(seq)
-    frames = _table_v_frames(len(seq), args.table_v_frames)
-    scale = len(seq) / len(frames)
-    print(f"[{renderer}] Table V on {len(frames)} frames (scale x{scale:.2f}) ...", flush=True)
-    storage = {m: _cdvs_storage_and_time(seq, frames, m, scale) for m in args.modes}
-    sift = _sift_storage_and_time(seq, frames, scale)
-    gt = seq.groundtruth_planar()
-    _figure(out / f"paper_{renderer}.png", renderer, gt, runs, chain["poses"])
-    return {"sequence": str(seq_path), "frames": len(seq), "table_v_frames": int(len(frames)), "runs": runs,
-            "chain": chain, "storage": storage, "sift": sift}
-
-
 def run(args: argparse.Namespace) -> BenchResult:
+    """VO once per renderer, then every mode on it, the ORB chain and Table V, as independent tasks on --jobs
+    processes: the modes first (Table IV is what the benchmark is for), then SIFT, the chain and Table V."""
     if args.quick:
         args.frames, args.length, args.modes, args.table_v_frames = 700, 11.0, [2, 4], 200
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    cache = Path(args.sequences) if args.sequences else out / "sequences"
+    figures = Path(args.figure_dir) if args.figure_dir else out
+    figures.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    results = {r: _one_renderer(args, r, out) for r in args.renderers}
-    minutes = (time.perf_counter() - t0) / 60
-    sections = []
+    seqs = {r: (_our_sequence if r == "ours" else _independent_sequence)(cache, args.frames, args.length, args.seed)
+            for r in args.renderers}
+    n = {r: len(open_sequence(p)) for r, p in seqs.items()}
+    cdvs_frames = {r: table_v_frames(n[r], args.table_v_frames) for r in seqs}
+    sift_n = args.table_v_frames if args.sift_frames is None else args.sift_frames
+    sift_frames = {r: table_v_frames(n[r], sift_n) for r in seqs}
+    with TaskPool(args.jobs, t0) as pool:
+        pending = {pool.submit(f"{r} VO", vo_pass, p, args.vo_cache, describe=summary): r for r, p in seqs.items()}
+        vo, modes = {}, {}
+        for f in as_completed(pending):     # a renderer's modes start as soon as its VO is done, the longest first
+            r = pending[f]
+            vo[r] = f.result()
+            for m in sorted(args.modes, reverse=True):
+                modes[r, m] = pool.submit(f"{r} mode {m}", run_mode, seqs[r], m, vo[r], out / r / f"mode{m}",
+                                          describe=summary)
+        sift = {r: pool.submit(f"{r} SIFT", sift_storage_and_time, p, sift_frames[r], n[r] / len(sift_frames[r]),
+                               describe=summary) for r, p in seqs.items()}
+        chain = {r: pool.submit(f"{r} ORB chain", baseline_chain, p, describe=summary) for r, p in seqs.items()}
+        cdvs = {(r, m): pool.submit(f"{r} Table V mode {m}", cdvs_storage_and_time, p, cdvs_frames[r], m,
+                                    n[r] / len(cdvs_frames[r]), describe=summary)
+                for r, p in seqs.items() for m in args.modes}
+        results = {r: {"sequence": str(seqs[r]), "frames": n[r], "table_v_frames": int(len(cdvs_frames[r])),
+                       "sift_frames": int(len(sift_frames[r])), "vo_seconds": vo[r].seconds,
+                       "vo_reused": vo[r].reused,
+                       "runs": [modes[r, m].result() for m in args.modes], "chain": chain[r].result(),
+                       "storage": {m: cdvs[r, m].result() for m in args.modes}, "sift": sift[r].result()}
+                   for r in seqs}
+        tasks = pool.report()
     for r, res in results.items():
-        head = (f"**{r} renderer**: {res['frames']} frames, {args.length:g} m of printed wood (two laps back to "
-                f"the start); Table V on {res['table_v_frames']} frames"
-                + ("" if res["table_v_frames"] == res["frames"] else ", scaled to all frames"))
-        sections += [head, table_iv(res["runs"], res["chain"]), table_v(res["storage"], res["sift"])]
-    text = "\n\n".join(sections) + f"\n\nWhole benchmark: {minutes:.1f} min on this machine."
+        gt = open_sequence(seqs[r]).groundtruth_planar()
+        paper_figure(figures / f"paper_{r}.png", r, gt, res["runs"], res["chain"]["poses"])
+    minutes = (time.perf_counter() - t0) / 60
+    text = _markdown(args, results, minutes)
     print("\n" + text)
     write_json(out / "paper.json", {
         "args": {k: v for k, v in vars(args).items() if isinstance(v, (int, float, str, list))},
-        "minutes": minutes, "paper": {"table_iv": PAPER_TABLE_IV, "table_v": PAPER_TABLE_V},
-        "results": {r: {"frames": v["frames"], "table_v_frames": v["table_v_frames"], "storage": v["storage"],
-                        "sift": v["sift"], "chain": {"start_to_end": v["chain"]["start_to_end"],
-                                                     "ate_m": v["chain"]["ate_m"]},
+        "minutes": minutes, "tasks": tasks, "paper": {"table_iv": PAPER_TABLE_IV, "table_v": PAPER_TABLE_V},
+        "results": {r: {**{k: v[k] for k in ("frames", "table_v_frames", "sift_frames", "vo_seconds", "vo_reused",
+                                              "storage", "sift")},
+                        "chain": {"start_to_end": v["chain"]["start_to_end"], "ate_m": v["chain"]["ate_m"]},
                         "modes": [{k: getattr(m, k) for k in ("mode", "vo", "slam", "vo_ate_m", "slam_ate_m",
-                                                             "accepted", "kept", "false_kept", "fps")}
+                                                             "accepted", "kept", "false_kept", "fps", "seconds")}
                                   for m in v["runs"]]}
                     for r, v in results.items()}})
-    print(f"wrote {out / 'paper.json'} and {', '.join(str(out / f'paper_{r}.png') for r in results)}")
+    print(f"wrote {out / 'paper.json'} and {', '.join(str(figures / f'paper_{r}.png') for r in results)}")
     return BenchResult(text)
 
+
+def _markdown(args, results: dict, minutes: float) -> str:
+    sections = []
+    for r, res in results.items():
+        scaled = res["table_v_frames"] < res["frames"] or res["sift_frames"] < res["frames"]
+        head = (f"**{r} renderer**: {res['frames']} frames, {args.length:g} m of printed wood (two laps back to "
+                f"the start); VO once in {res['vo_seconds']:.0f} s"
+                + (" (an earlier run's, from --vo-cache)" if res["vo_reused"] else "")
+                + f", shared by every mode; Table V on "
+                f"{res['table_v_frames']} frames (SIFT on {res['sift_frames']})"
+                + (", scaled to all frames" if scaled else ""))
+        sections += [head, table_iv(res["runs"], res["chain"]), table_v(res["storage"], res["sift"])]
+    return "\n\n".join(sections) + (f"\n\nWhole benchmark: {minutes:.1f} min on this machine ({args.jobs} worker "
+                                     "processes; frames/s = frames / (shared VO seconds + the mode's seconds after "
+                                     "VO), measured beside the other worker).")

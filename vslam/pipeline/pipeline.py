@@ -5,6 +5,8 @@
     result.write("demo/out")
 
 Online use: `p = Pipeline(config, camera)`, then `p.step(image, timestamp, prior)` per frame and `p.finish()`.
+Pipelines that differ only after VO (e.g. in the loop descriptor's mode) can share one VO pass:
+`vo = Pipeline(config).odometry(seq)`, then `Pipeline(other).run(seq, odometry=vo)`.
 """
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -27,7 +29,7 @@ from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import LoopPose, loop_pose
 from vslam.pipeline.motion_gate import ChainMotion, MotionGate, step_drift_covariance
 from vslam.pipeline.outputs import write_outputs
-from vslam.pipeline.prefetch import prefetch
+from vslam.pipeline.prefetch import lazy_frames, prefetch
 from vslam.pipeline.recognizers import build_loop_detector
 
 
@@ -163,16 +165,22 @@ class Pipeline:
         kf = self.keyframes[k]
         return compose(self.kf_slam[k], between(self.poses_vo[kf], self.poses_vo[index]))
 
-    def step(self, image: np.ndarray | None, timestamp: float,
-             prior: tuple[np.ndarray, np.ndarray] | None = None, decode_seconds: float = 0.0) -> FrameOutput:
+    def step(self, image: np.ndarray | Callable[[], np.ndarray | None] | None, timestamp: float,
+             prior: tuple[np.ndarray, np.ndarray] | None = None, decode_seconds: float = 0.0,
+             vo: VOEstimate | None = None) -> FrameOutput:
         """Process one frame. `image` may be None (unreadable frame); `prior` is the wheel/gyro motion since the
-        previous frame and its covariance (the fallback when vision fails)."""
+        previous frame and its covariance (the fallback when vision fails); `vo`, this frame's estimate from an
+        earlier VO pass (`odometry`), replaces running VO. With `vo`, `image` may be a loader (no arguments,
+        returns the image or None), called only if the frame becomes a keyframe or is recorded."""
         if self.camera is None:
             raise RuntimeError("call reset(camera) first (or give the camera to the constructor)")
         t_frame = time.perf_counter()
+        loaded = 0.0                   # seconds spent calling the loader, inside this step
+        if callable(image) and (vo is None or self.recorder is not None):
+            image, loaded = _load(image)
         index = len(self.timestamps)
         t0 = time.perf_counter()
-        est = self.vo.process(image, timestamp, fallback=prior)
+        est = self.vo.process(image, timestamp, fallback=prior) if vo is None else vo
         t_vo = time.perf_counter() - t0
         self.timestamps.append(float(timestamp))
         pose_vo = np.asarray(est.pose, float)
@@ -187,11 +195,13 @@ class Pipeline:
         t_loops = t_graph = 0.0
         found: list[LoopRecord] = []
         if keyframe:
+            if callable(image):
+                image, loaded = _load(image)
             t_loops, t_graph, found = self._keyframe_work(index, image)
         else:
             self._last_image = image   # kept (one frame) so that finish() can make the last frame a keyframe
         pose_slam = self.slam_pose(index)
-        timings = {"decode": decode_seconds, "vo": t_vo, "loops": t_loops, "graph": t_graph}
+        timings = {"decode": decode_seconds + loaded, "vo": t_vo, "loops": t_loops, "graph": t_graph}
         t0 = time.perf_counter()
         if self.recorder is not None:
             self._record(index, timestamp, image, est, pose_vo, pose_slam, found, timings)
@@ -324,7 +334,8 @@ class Pipeline:
         last = len(self.timestamps) - 1
         if last > 0 and self.keyframes[-1] != last:
             # the end of the run is a keyframe too: on a closed path it is where the closing loop is found
-            _, _, found = self._keyframe_work(last, self._last_image)
+            image = self._last_image
+            _, _, found = self._keyframe_work(last, _load(image)[0] if callable(image) else image)
             if self.recorder is not None:
                 for l in found:
                     if l.accepted:
@@ -345,20 +356,27 @@ class Pipeline:
                               similarity=self.similarity)
 
     # ------------------------------------------------------------------ whole sequences
-    def run(self, seq, progress: Callable[[int, int], None] | None = None, max_frames: int | None = None
-            ) -> PipelineResult:
-        """Process a whole `vslam.sequence.Sequence`; wheel/gyro streams (if any) give the fallback motion."""
+    def run(self, seq, progress: Callable[[int, int], None] | None = None, max_frames: int | None = None,
+            odometry: Sequence[VOEstimate] | None = None) -> PipelineResult:
+        """Process a whole `vslam.sequence.Sequence`; wheel/gyro streams (if any) give the fallback motion.
+        `odometry`: the per-frame estimates of `odometry(seq)` of a pipeline with the same `vo` and `fusion`
+        config, used instead of running VO again (the result is the same)."""
         t_start = time.perf_counter()
         self.reset(seq.require_camera())
         n = len(seq) if max_frames is None else min(len(seq), max_frames)
         if n == 0:
             raise VslamError(f"{seq.root or seq.name}: the sequence has no frames")
-        priors = self._priors(seq, n)
+        if odometry is not None:
+            _check_odometry(seq, n, odometry)
+        priors = self._priors(seq, n) if odometry is None else None   # the priors only feed VO
         if self.recorder is not None and seq.groundtruth is not None:
             self.recorder.log_groundtruth(seq.groundtruth_planar()[:n])
-        for fr in prefetch(seq, gray=True, stop=n):
+        # after a VO pass, a frame's pixels are read only if it becomes a keyframe (about one in 15)
+        frames = prefetch(seq, gray=True, stop=n) if odometry is None else lazy_frames(seq, stop=n)
+        for fr in frames:
             prior = None if priors is None or fr.index == 0 else priors(fr.index)
-            self.step(fr.image, fr.timestamp, prior, decode_seconds=fr.decode_seconds)
+            self.step(fr.image, fr.timestamp, prior, decode_seconds=fr.decode_seconds,
+                      vo=None if odometry is None else odometry[fr.index])
             if fr.error and self.recorder is not None:
                 self.recorder.log_text(f"frame {fr.index}: {fr.error}", "WARN")
             if progress is not None:
@@ -370,6 +388,15 @@ class Pipeline:
             self.recorder.replace_trajectory("slam", result.poses_slam)
             self._record_final_loops(result)
         return result
+
+    def odometry(self, seq, max_frames: int | None = None) -> list[VOEstimate]:
+        """Visual odometry alone over a whole sequence, as `run` computes it (same decoding, same wheel/gyro
+        fallback), for `run(seq, odometry=...)` of pipelines that differ only after VO."""
+        n = len(seq) if max_frames is None else min(len(seq), max_frames)
+        vo = VisualOdometry(seq.require_camera(), self.config.vo)
+        priors = self._priors(seq, n)
+        return [vo.process(fr.image, fr.timestamp, fallback=None if priors is None or fr.index == 0
+                           else priors(fr.index)) for fr in prefetch(seq, gray=True, stop=n)]
 
     def _priors(self, seq, n: int):
         """relative(i-1, i) of the fused wheel/gyro trajectory at the frame times, or None without streams."""
@@ -432,3 +459,20 @@ class Pipeline:
         acc = [l for l in loops if l.accepted]
         self.recorder.set_loops([seg(l) for l in acc if kept(l)], [seg(l) for l in acc if not kept(l)],
                                 [seg(l) for l in loops if not l.accepted] if candidates else None)
+
+
+def _check_odometry(seq, n: int, odometry: Sequence[VOEstimate]) -> None:
+    """Precomputed VO must cover the frames and belong to this sequence (same timestamps)."""
+    name = seq.root or seq.name
+    if len(odometry) < n:
+        raise VslamError(f"{name}: the precomputed odometry has {len(odometry)} frames, the run needs {n}")
+    for i in (0, n - 1):
+        if odometry[i].index != i or odometry[i].timestamp != float(seq.timestamps[i]):
+            raise VslamError(f"{name}: precomputed odometry frame {odometry[i].index} (t = {odometry[i].timestamp}) "
+                             f"does not match frame {i} (t = {float(seq.timestamps[i])}) of the sequence")
+
+
+def _load(loader: Callable[[], np.ndarray | None]) -> tuple[np.ndarray | None, float]:
+    t0 = time.perf_counter()
+    image = loader()
+    return image, time.perf_counter() - t0

@@ -1,7 +1,8 @@
 """Decode frames in a background thread while the pipeline works on the previous one.
 
 OpenCV releases the GIL while decoding, so on two cores decoding overlaps processing. The queue is bounded,
-so memory stays bounded whatever the sequence length; frames come out in order.
+so memory stays bounded whatever the sequence length; frames come out in order. `lazy_frames` is the same stream
+undecoded, for a consumer that needs only some frames' pixels.
 """
 from __future__ import annotations
 
@@ -25,6 +26,37 @@ class DecodedFrame:
     decode_seconds: float
 
 
+@dataclass(frozen=True)
+class LazyFrame:
+    """A frame read only when `image()` is called (None when the file cannot be read)."""
+    seq: Sequence
+    index: int
+    error: str = ""
+    decode_seconds: float = 0.0
+
+    @property
+    def timestamp(self) -> float:
+        return float(self.seq.timestamps[self.index])
+
+    def image(self) -> np.ndarray | None:
+        return read_frame(self.seq, self.index, gray=True).image
+
+
+def read_frame(seq: Sequence, i: int, gray: bool = True) -> DecodedFrame:
+    """Frame `i` decoded now; an unreadable file gives image None and the reason (the frame is lost, not the run)."""
+    t0 = time.perf_counter()
+    try:
+        img, err = seq.image(i, gray=gray), ""
+    except (ValueError, OSError) as exc:   # ImageReadError and friends
+        img, err = None, str(exc)
+    return DecodedFrame(i, float(seq.timestamps[i]), img, err, time.perf_counter() - t0)
+
+
+def lazy_frames(seq: Sequence, start: int = 0, stop: int | None = None) -> Iterator[LazyFrame]:
+    stop = len(seq) if stop is None else min(stop, len(seq))
+    return (LazyFrame(seq, i) for i in range(start, stop))
+
+
 def prefetch(seq: Sequence, gray: bool = True, depth: int = 8, start: int = 0, stop: int | None = None
              ) -> Iterator[DecodedFrame]:
     stop = len(seq) if stop is None else min(stop, len(seq))
@@ -35,12 +67,7 @@ def prefetch(seq: Sequence, gray: bool = True, depth: int = 8, start: int = 0, s
         for i in range(start, stop):
             if done.is_set():
                 return
-            t0 = time.perf_counter()
-            try:
-                img, err = seq.image(i, gray=gray), ""
-            except (ValueError, OSError) as exc:   # ImageReadError and friends: the frame is lost, not the run
-                img, err = None, str(exc)
-            item = DecodedFrame(i, float(seq.timestamps[i]), img, err, time.perf_counter() - t0)
+            item = read_frame(seq, i, gray)
             while not done.is_set():
                 try:
                     q.put(item, timeout=0.1)
