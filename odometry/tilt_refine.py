@@ -125,6 +125,7 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
     pcur = _floor(camera, xn_cur, [h * (1 + s)], [(rc, pc)])[0]
     c, sn = math.cos(q[2]), math.sin(q[2])
     res = pcur @ np.array([[c, -sn], [sn, c]]).T + q[:2] - pr
+    rms = math.sqrt(float((res * res).sum()) / n)   # reported in metres, unweighted
     if wl is not None:
         res = np.einsum("nij,nj->ni", wl, res)
     rss = float((res * res).sum())
@@ -135,5 +136,5 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
     except np.linalg.LinAlgError:
         return None
     cov = 0.5 * (cov_full[:3, :3] + cov_full[:3, :3].T)
-    return TiltFit(delta=q[:3].copy(), covariance=cov, params=q, sigma=sigma, rms=math.sqrt(rss / n),
+    return TiltFit(delta=q[:3].copy(), covariance=cov, params=q, sigma=sigma, rms=rms,
                    iterations=it, height_variance=float(cov_full[7, 7]))

@@ -46,6 +46,7 @@ from odometry.tracking import (
     highpass,
     normalize,
     normalize_local,
+    structure_tensors,
     to_gray,
     track_lk,
 )
@@ -327,6 +328,7 @@ class VisualOdometry:
         # camera heights (odometry.height) of the previous frame and of the frame being processed
         self._height = Height(camera.camera_height)
         self._frame_height = self._height
+        self._tensor_cache: tuple[_Images, np.ndarray] | None = None  # structure tensors of the last template
         self.heights = HeightTracker(camera.camera_height, self.config.height_window, self.config.height_significance)
 
     # ------------------------------------------------------------------ public state
@@ -534,9 +536,15 @@ class VisualOdometry:
         if len(cur_px) < c.min_inliers:
             return None, ref_px, cur_px, np.zeros(len(cur_px), bool)
         cur_xn = self.camera.normalize(cur_px)
-        weights = aperture_weights(ref_gray.fine, ref_px, c.lk_window) if c.aperture_weighting else None
+        weights = aperture_weights(self._tensors(ref_gray), ref_px) if c.aperture_weighting else None
         fit = self._fit(cur_xn, ref_xn, self._floor(cur_xn, h_ref), ref_floor, h_ref=h_ref, weights=weights)
         return fit, ref_px, cur_px, (fit.inliers if fit is not None else np.zeros(len(cur_px), bool))
+
+    def _tensors(self, ref_gray: _Images) -> np.ndarray:
+        """The structure tensors of a template image (kept for the last one: the keyframe serves many frames)."""
+        if self._tensor_cache is None or self._tensor_cache[0] is not ref_gray:
+            self._tensor_cache = (ref_gray, structure_tensors(ref_gray.fine, self.config.lk_window))
+        return self._tensor_cache[1]
 
     def _measure(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, keyframe=None, gate=None, h_ref=None):
         """The motion from a reference frame, trying in turn: LK from the prediction (the fast path), LK with a
