@@ -47,7 +47,8 @@ def _floor(camera: CameraModel, xn: np.ndarray, heights: np.ndarray, tilts: np.n
 
 def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarray, delta0: np.ndarray,
                        tilt_sigma: float, height_sigma: float, sigma_floor: float, iterations: int = 2,
-                       h_ref: float | None = None, s_prior: float = 0.0) -> TiltFit | None:
+                       h_ref: float | None = None, s_prior: float = 0.0,
+                       weights: np.ndarray | None = None) -> TiltFit | None:
     """Gauss-Newton refinement of the planar motion ref -> cur with both frames' tilt and the height ratio.
 
     Args:
@@ -60,6 +61,8 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
         iterations: Gauss-Newton steps (the problem is nearly linear: 2-3 suffice).
         h_ref: the reference frame's camera height (default: the camera's nominal height).
         s_prior: prior mean of s = h_cur / h_ref - 1 (e.g. pulling the current height towards the nominal one).
+        weights: optional (N, 2, 2) information shape of each residual in floor axes (e.g.
+            `odometry.tracking.aperture_weights`); None weighs every axis of every point alike.
 
     Returns None with fewer than 8 points.
     """
@@ -78,6 +81,7 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
     prec[3:7] = 1.0 / max(tilt_sigma, 1e-9) ** 2
     prec[7] = 1.0 / max(height_sigma / h, 1e-9) ** 2
     e = _EPS
+    wl = None if weights is None else np.linalg.cholesky(np.asarray(weights, float)).transpose(0, 2, 1)
     sigma2 = max(sigma_floor, 1e-12) ** 2
     it = 0
     for it in range(1, iterations + 1):
@@ -98,6 +102,9 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
         jac[:, :, 5] = ((pcur[1] - pcur[0]) / e) @ rot.T
         jac[:, :, 6] = ((pcur[2] - pcur[0]) / e) @ rot.T
         jac[:, :, 7] = ((pcur[3] - pcur[0]) / e) @ rot.T
+        if wl is not None:   # whiten: r^T W r = |L^T r|^2
+            res = np.einsum("nij,nj->ni", wl, res)
+            jac = np.einsum("nij,njk->nik", wl, jac)
         jf = jac.reshape(-1, 8)
         rf = res.reshape(-1)
         if it == 1:
@@ -118,6 +125,9 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
     pcur = _floor(camera, xn_cur, [h * (1 + s)], [(rc, pc)])[0]
     c, sn = math.cos(q[2]), math.sin(q[2])
     res = pcur @ np.array([[c, -sn], [sn, c]]).T + q[:2] - pr
+    rms = math.sqrt(float((res * res).sum()) / n)   # reported in metres, unweighted
+    if wl is not None:
+        res = np.einsum("nij,nj->ni", wl, res)
     rss = float((res * res).sum())
     sigma = max(math.sqrt(rss / max(2 * n - 8, 1)), sigma_floor)
     a = jf.T @ jf / sigma ** 2 + np.diag(prec)
@@ -126,5 +136,5 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
     except np.linalg.LinAlgError:
         return None
     cov = 0.5 * (cov_full[:3, :3] + cov_full[:3, :3].T)
-    return TiltFit(delta=q[:3].copy(), covariance=cov, params=q, sigma=sigma, rms=math.sqrt(rss / n),
+    return TiltFit(delta=q[:3].copy(), covariance=cov, params=q, sigma=sigma, rms=rms,
                    iterations=it, height_variance=float(cov_full[7, 7]))

@@ -163,3 +163,30 @@ def coarse_shift(ref: np.ndarray, cur: np.ndarray) -> tuple[np.ndarray, float]:
     win = cv2.createHanningWindow((a.shape[1], a.shape[0]), cv2.CV_32F)
     (dx, dy), response = cv2.phaseCorrelate(a, b, win)
     return np.array([dx * 4.0, dy * 4.0]), float(response)
+
+
+
+def structure_tensors(gray: np.ndarray, window: int) -> np.ndarray:
+    """(3, H, W) the structure tensor (gx gx, gx gy, gy gy) of every pixel summed over an LK window (box mean);
+    computed once per template image, then looked up at its points by `aperture_weights`."""
+    g = gray.astype(np.float32)
+    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
+    k = (int(window), int(window))
+    return np.stack([cv2.boxFilter(gx * gx, -1, k), cv2.boxFilter(gx * gy, -1, k), cv2.boxFilter(gy * gy, -1, k)])
+
+
+def aperture_weights(tensors: np.ndarray, pts: np.ndarray, floor: float = 0.05) -> np.ndarray:
+    """(N, 2, 2) shape of each point's LK information in floor axes (x = u, y = -v): its structure tensor over the
+    LK window (`structure_tensors`) divided by half its trace, so every point weighs 1 on average and an
+    edge-like window (the aperture problem: LK fixes only the component across the edge) weighs little along
+    the edge. Eigenvalues are kept above `floor` (an edge still says a little along itself: its ends)."""
+    p = np.rint(np.asarray(pts, float)).astype(int).reshape(-1, 2)
+    p[:, 0] = np.clip(p[:, 0], 0, tensors.shape[2] - 1)
+    p[:, 1] = np.clip(p[:, 1], 0, tensors.shape[1] - 1)
+    a, b, c = (tensors[k][p[:, 1], p[:, 0]].astype(float) for k in range(3))
+    b = -b   # y = -v flips the cross term
+    half = np.maximum((a + c) / 2.0, 1e-12)
+    w = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2) / half[:, None, None]
+    vals, vecs = np.linalg.eigh(w)
+    return np.einsum("nij,nj,nkj->nik", vecs, np.maximum(vals, floor), vecs)

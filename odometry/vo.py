@@ -39,12 +39,14 @@ from odometry.shared.poses import between, compose, wrap_angle
 from odometry.tilt_refine import refine_planar_tilt
 from odometry.tracking import (
     BadImage,
+    aperture_weights,
     coarse_shift,
     contrast,
     detect_corners,
     highpass,
     normalize,
     normalize_local,
+    structure_tensors,
     to_gray,
     track_lk,
 )
@@ -200,6 +202,13 @@ class VOConfig(Config):
     # own variances allow within the window. 3 sigma: a measurement-noise departure is used 0.3 % of the time
     height_significance: float = setting(3.0, range="[0, inf)", unit="sigma",
                                          doc="a keyframe's measured height departure below this is not used")
+    # LK fixes a window's position only across its edges (the aperture problem): on planks, grain and brick
+    # courses many windows are edge-like, and their error along the edge enters the refined motion and height
+    # off by default: it lowers render_floor's reporting rows (wood planks + brick most) but raises its two tuning
+    # rows by 0.007-0.017 % and makes the batch back end reject 9 of 49 true loops under a 3 % heading drift
+    # (tests/vslam/test_backend_drift.py) - see docs/odometry.md, item 11
+    aperture_weighting: bool = setting(False, doc="weigh each LK point's residual by the shape of its structure "
+                                                  "tensor in the tilt refinement (needs refine_tilt)")
     seed: int = setting(0, range="[0, inf)")
 
     def check(self) -> None:
@@ -322,6 +331,7 @@ class VisualOdometry:
         # camera heights (odometry.height) of the previous frame and of the frame being processed
         self._height = Height(camera.camera_height)
         self._frame_height = self._height
+        self._tensor_cache: tuple[_Images, np.ndarray] | None = None  # structure tensors of the last template
         self.heights = HeightTracker(camera.camera_height, self.config.height_window, self.config.height_significance)
 
     # ------------------------------------------------------------------ public state
@@ -456,7 +466,8 @@ class VisualOdometry:
 
     def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray, ref_floor: np.ndarray,
              threshold_px: float | None = None, min_inliers: int | None = None,
-             min_ratio: float | None = None, h_ref: Height | None = None) -> RigidFit | None:
+             min_ratio: float | None = None, h_ref: Height | None = None,
+             weights: np.ndarray | None = None) -> RigidFit | None:
         """RANSAC + Kabsch on floor points (cur -> ref, both at the reference's height `h_ref`), then the
         tilt-aware refinement on the inliers, which also measures the current frame's height relative to it
         (`RigidFit.height`, with track_height)."""
@@ -477,7 +488,8 @@ class VisualOdometry:
                 s_prior = math.expm1(self._height.log_rel - h_ref.log_rel)
             tf = refine_planar_tilt(self.camera, ref_xn[fit.inliers], cur_xn[fit.inliers], fit.delta,
                                     c.tilt_sigma, c.height_sigma, c.pixel_sigma * self._m_per_px,
-                                    h_ref=None if h == self.camera.camera_height else h, s_prior=s_prior)
+                                    h_ref=None if h == self.camera.camera_height else h, s_prior=s_prior,
+                                    weights=None if weights is None else weights[fit.inliers])
             if tf is not None:
                 fit.delta, fit.covariance, fit.rms, fit.sigma = tf.delta, tf.covariance, tf.rms, tf.sigma
                 if c.track_height and h_ref is not None:
@@ -527,8 +539,15 @@ class VisualOdometry:
         if len(cur_px) < c.min_inliers:
             return None, ref_px, cur_px, np.zeros(len(cur_px), bool)
         cur_xn = self.camera.normalize(cur_px)
-        fit = self._fit(cur_xn, ref_xn, self._floor(cur_xn, h_ref), ref_floor, h_ref=h_ref)
+        weights = aperture_weights(self._tensors(ref_gray), ref_px) if c.aperture_weighting else None
+        fit = self._fit(cur_xn, ref_xn, self._floor(cur_xn, h_ref), ref_floor, h_ref=h_ref, weights=weights)
         return fit, ref_px, cur_px, (fit.inliers if fit is not None else np.zeros(len(cur_px), bool))
+
+    def _tensors(self, ref_gray: _Images) -> np.ndarray:
+        """The structure tensors of a template image (kept for the last one: the keyframe serves many frames)."""
+        if self._tensor_cache is None or self._tensor_cache[0] is not ref_gray:
+            self._tensor_cache = (ref_gray, structure_tensors(ref_gray.fine, self.config.lk_window))
+        return self._tensor_cache[1]
 
     def _measure(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, keyframe=None, gate=None, h_ref=None):
         """The motion from a reference frame, trying in turn: LK from the prediction (the fast path), LK with a
