@@ -9,7 +9,9 @@
    cluster: a cluster's squared residual is the sum over its loops, its threshold the sum of their chi-square
    thresholds. A group of mutually consistent false loops is thus one hypothesis that the rest of the map accepts
    or rejects as a whole. Inner solves are warm-started (a few LM iterations per step).
-4. polish with the kept loops, then re-admit every rejected loop that fits its own threshold at the solution.
+4. polish with the kept loops; the group-level test (each kept revisit cluster one TLS term at the chi-square
+   quantile of its n x dof, dropped when the objective is lower without it); then re-admit every rejected loop
+   that fits its own threshold at the solution.
 """
 from __future__ import annotations
 
