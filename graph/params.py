@@ -157,6 +157,11 @@ class RobustParams(Config):
                                        "(a lone true loop under drift fits only once the map moves to it); more are "
                                        "only tested at the solution: long-range loops in every inner solve cost "
                                        "minutes on 10^4-node graphs")
+    group_tests: int = setting(10, range="[0, inf)", unit="clusters",
+                               doc="after GNC, re-solve without each of this many kept clusters of agreeing loops "
+                                   "(those nearest their thresholds first) and drop a cluster whose absence lowers "
+                                   "the TLS objective: a group of consistent false loops the map bent to fits "
+                                   "loop by loop (graph.robust); 0: off")
     odometry_start: bool = setting(True, doc="also run GNC from the odometry chain; keep the lower TLS objective")
     cluster_weights: bool = setting(False, doc="one GNC weight per cluster of agreeing loops instead of per loop")
     huber_k: float = setting(1.345, range="(0, inf)", doc="kernel width on the whitened residual norm")

@@ -25,9 +25,9 @@ from graph.batch import build, initial_guess, lm_params, resolve_init
 from graph.factors import array_from_values, graph_of, squared_residuals, values_from_array
 from graph.gnc import tls_weights
 from graph.model import TANGENT_DIM, PoseGraphData
-from graph.params import GraphParams, InitMethod
+from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.result import GraphResult
-from graph.support import clusters, loop_support
+from graph.support import clusters, loop_support, revisits
 from graph.thresholds import loop_thresholds
 
 
@@ -100,6 +100,91 @@ def _readmit(built, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray, pa
     return values, inlier, iters
 
 
+def group_threshold(probability: np.ndarray, dof: int, scale: float, params: GraphParams) -> float:
+    """Truncation level of a cluster of n loops judged as one hypothesis: the chi-square quantile of its summed
+    squared residuals (n x dof degrees of freedom), shifted by the log-odds of its mean loop probability (as a
+    single loop's, graph.thresholds), times the calibration scale of the loop thresholds."""
+    n = len(probability)
+    c2 = float(chi2.ppf(params.robust.inlier_probability, n * dof))
+    p = probability[np.isfinite(probability)]
+    if len(p) and params.robust.loop_weighting == LoopWeighting.THRESHOLD:
+        pc = float(np.clip(p.mean(), params.robust.probability_clip, 1.0 - params.robust.probability_clip))
+        c2 = max(c2 + 2.0 * np.log(pc / (1.0 - pc)), 0.05 * c2)
+    return c2 * scale
+
+
+def _drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+                       inlier: np.ndarray, c2: np.ndarray, scale: float, init: InitMethod, params: GraphParams,
+                       notes: list[str]) -> tuple[gtsam.Values, np.ndarray, int]:
+    """The group-level test: each kept revisit cluster (graph.support.revisits) is one hypothesis in the TLS
+    objective, truncated at its group threshold (`group_threshold`); a cluster is dropped when the map solved
+    without it has the lower objective.
+
+    A group of mutually consistent false loops supports itself in the cycle test, and once the map has bent to it
+    every one of its loops fits its own threshold: per-loop GNC weights cannot see it, the strain sits in the
+    odometry (a known inlier, never truncated). Per loop, rejecting the group would cost n loop thresholds, each
+    with the heavy-tail margin and the probability shift (ring random-grouped: 10 x 44 against ~140 of bending);
+    but n loops of one event are one claim, and the sum of n squared residuals has a far lighter tail than one, so
+    the group is truncated at the chi-square quantile of n x dof. A true cluster stays: removing it leaves its
+    loops either still fitting (the rest of the map agrees: no re-solve is needed) or the map drifting by the
+    amount the cluster corrected, which costs it its group threshold and more. Cost: one warm LM solve per
+    tested cluster (the `group_tests` whose loops sit nearest their thresholds) screens with a few warm LM
+    iterations; full warm and LAGO / chordal re-solves only for a cluster whose loops no longer fit without it.
+    """
+    iters = 0
+    budget = params.robust.group_tests
+    if budget <= 0 or not inlier.any():
+        return values, inlier, 0
+    dof = TANGENT_DIM[data.dim]
+    component = revisits(data, params.robust.support_window, inlier)
+    labels, counts = np.unique(component[inlier], return_counts=True)
+    groups = labels[counts >= 2]                # a lone loop is GNC's to judge, one weight each
+    if not len(groups):
+        return values, inlier, 0
+    r2 = squared_residuals(built.loops, values)
+    ratio = np.array([r2[component == g].sum() / c2[component == g].sum() for g in groups.tolist()])
+    order = groups[np.argsort(-ratio, kind="stable")][:budget]
+    prob = data.probability[built.loop_idx]
+    dropped = 0
+
+    def objective(v: gtsam.Values, member: np.ndarray, c2g: float) -> float:
+        r = squared_residuals(built.loops, v)
+        own = float(np.minimum(r[member], c2[member]).sum())
+        return tls_objective(base_graph, built.loops, v, c2) + 0.5 * (min(float(r[member].sum()), c2g) - own)
+
+    for g in order.tolist():
+        member = component == g
+        trial = inlier & ~member
+        # screen with a few warm iterations (one full solve per cluster tripled city10000 clean): the map moves
+        # most of the way at once, so a cluster whose loops still fit then is not what bends the map
+        v, it = _lm(built.graph(trial), values, params, params.robust.consensus_inner_iterations)
+        iters += it
+        if np.all(squared_residuals(built.loops, v)[member] <= c2[member]):
+            continue
+        v, it = _lm(built.graph(trial), v, params, params.solver.lm_max_iterations)
+        iters += it
+        c2g = group_threshold(prob[member], dof, scale, params)
+        f0 = objective(values, member, c2g)
+        f = objective(v, member, c2g)
+        # also from a fresh LAGO / chordal start on the rest: a map bent by tens of metres does not unbend by
+        # local steps (ring random-grouped: a local minimum above the objective with the group kept)
+        try:
+            guess = values_from_array(data.dim, initial_guess(data, built.subset(trial), init))
+            v2, it = _lm(built.graph(trial), guess, params, params.solver.lm_max_iterations)
+            iters += it
+            f2 = objective(v2, member, c2g)
+            if f2 < f:
+                v, f = v2, f2
+        except RuntimeError:
+            pass
+        if f < f0:
+            values, inlier = v, trial
+            dropped += int(member.sum())
+    if dropped:
+        notes.append(f"group test: dropped {dropped} loops in clusters that lowered the TLS objective by leaving")
+    return values, inlier, iters
+
+
 def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     t_start = time.perf_counter()
     built = build(data, params.replace(robust="none"))
@@ -129,6 +214,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             starts.append(("supported loops", v))
         except RuntimeError:
             notes.append("LAGO / chordal start on the supported loops failed")
+    scale = 1.0
     if params.robust.calibrate_noise and len(pairs[2]) >= params.robust.calibration_min_loops:
         # variance factor from the agreeing cycles: their median error over the chi-square median. Local, so
         # neither drift nor a false loop bending the map (both inflate a global a-posteriori estimate) enter it
@@ -173,6 +259,9 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     t_gnc = time.perf_counter()
     # 4. polish; admit the loops that fit at the solution; try the unsupported loops closest to fitting jointly
     values, it = _lm(built.graph(inlier), values, params, params.solver.lm_max_iterations)
+    iters += it
+    values, inlier, it = _drop_false_groups(data, built, base_graph, values, inlier, c2, scale, method, params,
+                                           notes)
     iters += it
     values, inlier, it = _readmit(built, values, inlier, c2, params, notes)
     iters += it

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from graph.model import PoseGraphData
@@ -117,6 +118,26 @@ def loop_support(data: PoseGraphData, window: int, threshold: float, odometry_co
     r2 = np.einsum("ni,ni->n", e, np.linalg.solve(s, e[..., None])[..., 0])
     ok = r2 <= threshold
     return P[ok], Q[ok], r2[ok]
+
+
+def revisits(data: PoseGraphData, window: int, which: np.ndarray) -> np.ndarray:
+    """Label per loop: connected components of the neighbour relation of the cycle test (both ends within
+    `window` nodes, either orientation) among the loops selected by `which`; -1 for the others.
+
+    One revisit of a stretch, whether its loops agree pairwise or not: a group of false loops along a bend agrees
+    only in short runs (the cycle test compares the odometry at both ends), so its agreeing clusters are pieces of
+    one claim, and a piece left out alone is held in place by the others."""
+    a_all, b_all = data.edge_index_pairs()
+    li = data.loop_edges()
+    lo, hi = np.minimum(a_all[li], b_all[li]), np.maximum(a_all[li], b_all[li])
+    out = np.full(len(li), -1, np.int64)
+    sel = np.flatnonzero(which)
+    if not len(sel):
+        return out
+    pts = np.column_stack([lo[sel], hi[sel]]).astype(float)
+    pairs = cKDTree(pts).query_pairs(r=max(window, 0), p=np.inf, output_type="ndarray")
+    out[sel] = clusters(len(sel), pairs[:, 0], pairs[:, 1])
+    return out
 
 
 def clusters(num_loops: int, p: np.ndarray, q: np.ndarray) -> np.ndarray:
