@@ -177,6 +177,10 @@ class VOConfig(Config):
                                       doc="ORB keypoints of the retry on a descriptor failure (0: no retry)")
     orb_dense_fast_threshold: int = setting(3, range="[1, 255]", unit="grey levels",
                                             doc="FAST threshold of the dense retry")
+    # at high frame rates LK tracks most of the 200 keyframe corners (about 150-200 inliers), so the check costs
+    # nothing there; at a low rate a correct LK start tracks 20-60 of them, as does a wrong one on grass
+    lk_weak_inliers: int = setting(60, range="[0, inf)",
+                                   doc="an LK fit with fewer inliers is checked against the descriptor path")
     orb_hypotheses: int = setting(3, range="[1, inf)", doc="RANSAC consensus sets tried in turn until LK confirms one")
     # render_floor's mosaic holds rotated copies of the same photographs: 67 ORB inliers at a wrong place were
     # seen, so an unconfirmed ORB motion must be far stronger than that
@@ -577,6 +581,14 @@ class VisualOdometry:
                 # a poor prediction (slip, failed frames in between): the same start with a wider capture range
                 out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep, h_ref=h_ref)
                 method = Method.LK_PYRAMID
+        if out[0] is not None and out[0].n_inliers < c.lk_weak_inliers and keyframe is not None and c.descriptors:
+            # few corners tracked from the prediction: at a low frame rate the prediction (constant velocity) is a
+            # guess, and on a self-similar floor LK can settle at a wrong place with 20-35 consistent corners
+            # (seen at lane turns on real grass and carpet photographs). The descriptor path starts LK on the same
+            # keyframe corners from where the ORB matches put them; the start that tracks more of them wins
+            alt, alt_method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
+            if alt[0] is not None and alt[0].n_inliers > out[0].n_inliers:
+                out, method = alt, alt_method
         if out[0] is None and keyframe is not None and c.descriptors:
             out, method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
         if out[0] is None and c.coarse_retry:
