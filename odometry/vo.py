@@ -585,9 +585,11 @@ class VisualOdometry:
             # few corners tracked from the prediction: at a low frame rate the prediction (constant velocity) is a
             # guess, and on a self-similar floor LK can settle at a wrong place with 20-35 consistent corners
             # (seen at lane turns on real grass and carpet photographs). The descriptor path starts LK on the same
-            # keyframe corners from where the ORB matches put them; the start that tracks more of them wins
+            # keyframe corners from where the ORB matches put them; when the two places differ, the start that
+            # tracks more of them wins (when they agree, LK's own fit stands: the frame is not a descriptor frame)
             alt, alt_method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
-            if alt[0] is not None and alt[0].n_inliers > out[0].n_inliers:
+            if alt[0] is not None and alt[0].n_inliers > out[0].n_inliers \
+                    and not self._same_place(alt[0].delta, out[0].delta):
                 out, method = alt, alt_method
         if out[0] is None and keyframe is not None and c.descriptors:
             out, method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
@@ -670,6 +672,13 @@ class VisualOdometry:
         if best is not None:
             return best, Method.ORB_LK
         return (strong, Method.ORB) if strong is not None else none
+
+    def _same_place(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Two motions within the ORB inlier distance of each other, at the image centre and at its edge."""
+        tol = self.config.orb_threshold_px
+        d = a - b
+        return bool(math.hypot(d[0], d[1]) / self._m_per_px <= tol
+                    and abs(wrap_angle(d[2])) * 0.5 * max(self.camera.size) <= tol)
 
     def _visible(self, kf: _Keyframe, t_kc: np.ndarray) -> int:
         """How many of the keyframe's corners the motion t_kc puts inside the current image."""
