@@ -4,7 +4,9 @@ LK (odometry.tracking) is precise and cheap but needs a motion prediction within
 not rotated much. ORB keypoints carry an orientation and a pyramid octave, so a match survives any in-plane
 rotation (a 180 degree lane turn), a shift of most of the footprint (a 0.1 Hz camera) and small height changes.
 The VO uses these matches only as a starting point: the motion they give seeds LK on the keyframe's corners,
-which then measures it to a tenth of a pixel (see `odometry.vo`).
+which then measures it to a tenth of a pixel (see `odometry.vo`). The VO computes a second, denser set (more
+keypoints at a lower FAST threshold) only when the first gives no motion: a weakly textured floor such as bare
+concrete has few corners above the default threshold inside the overlap.
 
 Matching is brute-force Hamming with Lowe's ratio test and a mutual-best check (one-to-one matches: on repeated
 patterns a keypoint may not collect several partners), like the naive ORB chain the benchmark compares against.

@@ -171,6 +171,18 @@ class VOConfig(Config):
     orb_min_inliers: int = setting(12, range="[3, inf)", doc="fewer ORB inliers: the descriptor path fails")
     orb_min_inlier_ratio: float = setting(0.1, range="[0, 1]",
                                           doc="of the ratio-test survivors (many lie outside the overlap)")
+    # a weakly textured floor (bare concrete) gives FAST few corners above orb_fast_threshold in the overlap: on a
+    # render_floor concrete pair turned by 34 degrees and shifted by 40 % of the footprint, 1500 ORB at 8 grey
+    # levels held 8 correct matches, 5000 at 3 grey levels 100. The denser set costs ~4x to detect and ~10x to
+    # match, so it is only a retry when the first set gave no motion (never on the LK fast path)
+    orb_dense_features: int = setting(5000, range="[0, inf)",
+                                      doc="ORB keypoints of the retry on a descriptor failure (0: no retry)")
+    orb_dense_fast_threshold: int = setting(3, range="[1, 255]", unit="grey levels",
+                                            doc="FAST threshold of the dense retry")
+    # at high frame rates LK tracks most of the 200 keyframe corners (about 150-200 inliers), so the check costs
+    # nothing there; at a low rate a correct LK start tracks 20-60 of them, as does a wrong one on grass
+    lk_weak_inliers: int = setting(60, range="[0, inf)",
+                                   doc="an LK fit with fewer inliers is checked against the descriptor path")
     orb_hypotheses: int = setting(3, range="[1, inf)", doc="RANSAC consensus sets tried in turn until LK confirms one")
     # render_floor's mosaic holds rotated copies of the same photographs: 67 ORB inliers at a wrong place were
     # seen, so an unconfirmed ORB motion must be far stronger than that
@@ -287,6 +299,7 @@ class _Keyframe:
     xn: np.ndarray       # (N, 2) their undistorted normalised coordinates
     floor: np.ndarray    # (N, 2) their floor points in the keyframe's base frame
     orb: Features | None = None  # ORB features, computed when the descriptor path first needs them
+    orb_dense: Features | None = None  # the dense retry's ORB features, likewise
     height: Height | None = None  # its camera height (None: the nominal camera_height)
 
 
@@ -327,6 +340,8 @@ class VisualOdometry:
         self._anchored = True
         self._unanchored_since: int | None = None
         self._frame_orb: Features | None = None   # ORB features of the frame being processed, when computed
+        self._frame_orb_dense: Features | None = None  # its dense-retry ORB features, when computed
+        self._dense_pass = False                  # the descriptor path matches the dense ORB sets (_dense_retry)
         self._gate: tuple[np.ndarray, np.ndarray] | None = None  # fallback motion since the previous frame + cov
         # camera heights (odometry.height) of the previous frame and of the frame being processed
         self._height = Height(camera.camera_height)
@@ -354,6 +369,7 @@ class VisualOdometry:
         index = len(self._poses)
         self._fit_seconds = 0.0
         self._frame_orb = None
+        self._frame_orb_dense = None
         self._frame_height = self._height
         if self._last_t is not None and not timestamp > self._last_t:
             raise OdometryError(f"frame {index}: timestamp {timestamp!r} does not increase (previous {self._last_t!r})")
@@ -395,6 +411,8 @@ class VisualOdometry:
             if est is None and self._prev_px is not None and self._prev_gray is not None \
                     and self._kf.index != index - 1:
                 est = self._match_previous(gray, index, timestamp, dt, pred)
+            if est is None and self.config.descriptors and self.config.orb_dense_features > 0:
+                est = self._dense_retry(gray, index, timestamp, dt, pred)
             if est is None:
                 reason = "too few inliers"
         elif gray is not None:
@@ -411,6 +429,20 @@ class VisualOdometry:
         return est
 
     # ------------------------------------------------------------------ pieces
+    def _dense_retry(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
+        """The keyframe, then the previous frame, again with the dense ORB sets only (no LK retries: those
+        already failed). Last because it is the slowest and the likeliest to find a repeated pattern's wrong
+        place: a closer reference (the previous frame) with the default set comes first."""
+        self._dense_pass = True
+        try:
+            est = self._match_keyframe(gray, index, timestamp, dt, pred) if self._kf is not None else None
+            if est is None and self._prev_px is not None and self._prev_gray is not None \
+                    and (self._kf is None or self._kf.index != index - 1):
+                est = self._match_previous(gray, index, timestamp, dt, pred)
+            return est
+        finally:
+            self._dense_pass = False
+
     def _prepare(self, gray: np.ndarray) -> _Images:
         mode, radius = self.config.photometric, self.config.photometric_radius
         coarse = normalize(gray)
@@ -442,7 +474,8 @@ class VisualOdometry:
         if h is not None:
             self._frame_height = h
         self._kf = _Keyframe(index=index, timestamp=timestamp, gray=gray, pts=pts, xn=xn,
-                             floor=self._floor(xn, h), orb=self._frame_orb, height=h)
+                             floor=self._floor(xn, h), orb=self._frame_orb,
+                             orb_dense=self._frame_orb_dense, height=h)
         self._t_kp = np.zeros(3)
         self._c_kp = np.zeros((3, 3))
         self._c_kp_fit = np.zeros((3, 3))
@@ -557,12 +590,26 @@ class VisualOdometry:
         c = self.config
         deep = max(c.lk_levels, c.retry_levels)
         out, method = _NO_MATCH, Method.NONE
+        if self._dense_pass:
+            if keyframe is not None:
+                out, method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
+            return out, (method if out[0] is not None else Method.NONE)
         if t_ref_cur is not None:
             out, method = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, h_ref=h_ref), Method.LK
             if out[0] is None and deep > c.lk_levels:
                 # a poor prediction (slip, failed frames in between): the same start with a wider capture range
                 out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep, h_ref=h_ref)
                 method = Method.LK_PYRAMID
+        if out[0] is not None and out[0].n_inliers < c.lk_weak_inliers and keyframe is not None and c.descriptors:
+            # few corners tracked from the prediction: at a low frame rate the prediction (constant velocity) is a
+            # guess, and on a self-similar floor LK can settle at a wrong place with 20-35 consistent corners
+            # (seen at lane turns on real grass and carpet photographs). The descriptor path starts LK on the same
+            # keyframe corners from where the ORB matches put them; when the two places differ, the start that
+            # tracks more of them wins (when they agree, LK's own fit stands: the frame is not a descriptor frame)
+            alt, alt_method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
+            if alt[0] is not None and alt[0].n_inliers > out[0].n_inliers \
+                    and not self._same_place(alt[0].delta, out[0].delta):
+                out, method = alt, alt_method
         if out[0] is None and keyframe is not None and c.descriptors:
             out, method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
         if out[0] is None and c.coarse_retry:
@@ -576,8 +623,10 @@ class VisualOdometry:
             method = Method.LK_PYRAMID
         return out, (method if out[0] is not None else Method.NONE)
 
-    def _orb(self, images: _Images) -> Features:
+    def _orb(self, images: _Images, dense: bool = False) -> Features:
         c = self.config
+        if dense:
+            return orb_features(images.coarse, c.orb_dense_features, c.orb_dense_fast_threshold, c.border)
         return orb_features(images.coarse, c.orb_features, c.orb_fast_threshold, c.border)
 
     def _descriptor_match(self, kf: _Keyframe, gray: _Images, t_pred: np.ndarray | None,
@@ -585,23 +634,44 @@ class VisualOdometry:
         """ORB matches keyframe -> frame, the rigid fit on their floor points, then LK on the keyframe's corners
         started from that motion (sub-pixel). `gate` = (predicted motion, covariance): a fit outside it is
         rejected (a repeated pattern can match the wrong place). With `confirm`, only LK-confirmed motions count
-        (re-acquisition: the keyframe may be any of several, so a wrong place is likelier)."""
+        (re-acquisition: the keyframe may be any of several, so a wrong place is likelier). In the dense pass (see
+        `process`) the denser ORB sets are matched instead, and their motions must be confirmed by LK."""
+        if not self._dense_pass:
+            if kf.orb is None:
+                kf.orb = self._orb(kf.gray)
+            if self._frame_orb is None:
+                self._frame_orb = self._orb(gray)
+            return self._orb_hypotheses(kf, kf.orb, self._frame_orb, gray, t_pred, gate, confirm, strong_alone=True)
+        if kf.orb_dense is None:
+            kf.orb_dense = self._orb(kf.gray, dense=True)
+        if self._frame_orb_dense is None:
+            self._frame_orb_dense = self._orb(gray, dense=True)
+        # many more weak corners: more chance of a consistent wrong consensus on a repeated texture, so no
+        # unconfirmed ORB-only motion from this set
+        return self._orb_hypotheses(kf, kf.orb_dense, self._frame_orb_dense, gray, t_pred, gate, confirm,
+                                    strong_alone=False)
+
+    def _orb_hypotheses(self, kf: _Keyframe, kf_orb: Features, frame_orb: Features, gray: _Images,
+                        t_pred: np.ndarray | None, gate: tuple[np.ndarray, np.ndarray] | None, confirm: bool,
+                        strong_alone: bool):
+        """The RANSAC consensus sets of one pair of ORB sets, tried in turn until LK confirms one."""
         c = self.config
         none = (_NO_MATCH, Method.NONE)
-        if kf.orb is None:
-            kf.orb = self._orb(kf.gray)
-        if self._frame_orb is None:
-            self._frame_orb = self._orb(gray)
-        ia, ib = match_features(kf.orb, self._frame_orb, c.orb_ratio)
+        ia, ib = match_features(kf_orb, frame_orb, c.orb_ratio)
         if len(ia) < c.orb_min_inliers:
             return none
-        ref_px, cur_px = kf.orb.pts[ia], self._frame_orb.pts[ib]
+        ref_px, cur_px = kf_orb.pts[ia], frame_orb.pts[ib]
         ref_xn, cur_xn = self.camera.normalize(ref_px), self.camera.normalize(cur_px)
         ref_fl, cur_fl = self._floor(ref_xn, kf.height), self._floor(cur_xn, kf.height)
         # a repeated texture (or any pattern that the ORB tests cannot tell apart) can give a consistent but wrong
-        # motion: each RANSAC winner must be confirmed by LK on the keyframe's corners, else the next consensus
-        # among the remaining matches is tried. Only a strong ORB consensus stands on its own.
+        # motion: each RANSAC winner must be confirmed by LK on the keyframe's corners, and the next consensus
+        # among the remaining matches is tried too; the place where LK tracks the largest share of the corners
+        # it puts in view wins (a copy of a texture patch covers only part of the view: seen on render_floor,
+        # a wrong place with 40 of 88 corners tracked came first and the true one second). Only a strong ORB
+        # consensus stands on its own.
         left = np.arange(len(ia))
+        need = c.reacquire_min_fraction if confirm else c.orb_confirm_fraction
+        best, best_share, strong = None, 0.0, None
         for _ in range(c.orb_hypotheses):
             if len(left) < c.orb_min_inliers:
                 break
@@ -611,14 +681,23 @@ class VisualOdometry:
                 break
             if gate is None or t_pred is None or self._in_gate(fit, t_pred, gate[1]):
                 refined = self._track(kf.gray, kf.pts, kf.xn, kf.floor, gray, fit.delta, h_ref=kf.height)
-                need = c.reacquire_min_fraction if confirm else c.orb_confirm_fraction
-                if refined[0] is not None and refined[0].n_inliers >= need * self._visible(kf, fit.delta):
-                    return refined, Method.ORB_LK
-                if not confirm and fit.n_inliers >= c.orb_strong_inliers \
+                share = 0.0 if refined[0] is None else refined[0].n_inliers / max(self._visible(kf, fit.delta), 1)
+                if share >= need and share > best_share:
+                    best, best_share = refined, share
+                if strong is None and strong_alone and not confirm and fit.n_inliers >= c.orb_strong_inliers \
                         and fit.n_inliers >= c.orb_strong_ratio * len(ia):
-                    return (fit, ref_px[left], cur_px[left], fit.inliers), Method.ORB
+                    strong = (fit, ref_px[left], cur_px[left], fit.inliers)
             left = left[~fit.inliers]
-        return none
+        if best is not None:
+            return best, Method.ORB_LK
+        return (strong, Method.ORB) if strong is not None else none
+
+    def _same_place(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Two motions within the ORB inlier distance of each other, at the image centre and at its edge."""
+        tol = self.config.orb_threshold_px
+        d = a - b
+        return bool(math.hypot(d[0], d[1]) / self._m_per_px <= tol
+                    and abs(wrap_angle(d[2])) * 0.5 * max(self.camera.size) <= tol)
 
     def _visible(self, kf: _Keyframe, t_kc: np.ndarray) -> int:
         """How many of the keyframe's corners the motion t_kc puts inside the current image."""
