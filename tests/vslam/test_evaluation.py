@@ -121,3 +121,25 @@ def test_eval_command(tmp_path, capsys):
     empty.mkdir()
     assert main(["eval", str(empty), "--gt", str(gt)]) == 2
     assert "no trajectory" in capsys.readouterr().err
+
+
+def test_loop_recall_counts_only_revisits_the_detector_could_report():
+    """With the pipeline's exclusions (2 s, and only once the camera left a keyframe's footprint), a straight run has
+    no positive query, and driving back over it makes the return queries positive; a bare one-query separation
+    counts every slow neighbour as a missed loop."""
+    cam = CameraModel.from_dict({"fx": 500, "fy": 500, "cx": 320, "cy": 240, "width": 640, "height": 480,
+                                 "camera_height": 0.5})
+    n = 60
+    out_and_back = np.zeros((2 * n, 3))
+    out_and_back[:n, 0] = np.arange(n) * 0.05
+    out_and_back[n:, 0] = out_and_back[:n, 0][::-1]
+    none = np.zeros(0, int)
+    loops = LoopTable(query=none, match=none, global_score=np.zeros(0), local_score=np.zeros(0),
+                      probability=np.zeros(0), accepted=np.zeros(0, bool), inlier=None)
+    q, t = np.arange(2 * n), np.arange(2 * n) * 0.5
+    bare = loop_precision_recall(cam, out_and_back[:n], loops, queried=q[:n])
+    assert bare["positive_queries"] == n - 1
+    kw = dict(stamps=t, min_seconds=2.0, after_leaving=True)
+    assert loop_precision_recall(cam, out_and_back[:n], loops, queried=q[:n], **kw)["positive_queries"] == 0
+    back = loop_precision_recall(cam, out_and_back, loops, queried=q, **kw)
+    assert n // 2 < back["positive_queries"] < n

@@ -60,12 +60,16 @@ def read_loops_csv(path: str | Path) -> LoopTable:
 
 def loop_precision_recall(camera: CameraModel, gt_poses: np.ndarray, loops: LoopTable, queried: np.ndarray | None = None,
                           r: float = DEFAULT_OVERLAP_THRESHOLD, min_separation: int = 1,
-                          use_inliers: bool = False) -> dict:
+                          use_inliers: bool = False, stamps: np.ndarray | None = None, min_seconds: float = 0.0,
+                          after_leaving: bool = False) -> dict:
     """Precision of the reported loops and recall over the queries that had a true loop.
 
     gt_poses: (N, 3) planar ground truth per frame. queried: frame indices that were queried for loops (keyframes);
     a query counts as a positive when some queried frame at least `min_separation` queries earlier has J >= r
     (the detector's own exclusion of recent keyframes, so neighbours in time are not counted as missed loops).
+    The detector's other exclusions, when it used them: `stamps` (per frame) and `min_seconds`, an earlier frame
+    counts only when it is that much older; `after_leaving`, only once a later queried frame's footprint no longer
+    overlaps it (the camera left the place: a revisit, not the same visit).
     use_inliers: judge the loops kept by the back end (accepted and inlier) instead of all accepted ones.
     """
     keep = loops.accepted & (loops.inlier if (use_inliers and loops.inlier is not None) else True)
@@ -83,7 +87,14 @@ def loop_precision_recall(camera: CameraModel, gt_poses: np.ndarray, loops: Loop
         if ok.sum() > 1:
             Jm[np.ix_(ok, ok)] = overlap_matrix(camera, P[ok])
         rank = np.arange(len(queried))
-        earlier = (rank[:, None] - rank[None, :]) >= max(1, min_separation)
+        earlier = (rank[:, None] - rank[None, :]) >= max(1, min_separation)     # [query, earlier frame]
+        if stamps is not None and min_seconds > 0:
+            ts = np.asarray(stamps, dtype=float)[queried]
+            earlier &= (ts[:, None] - ts[None, :]) >= min_seconds
+        if after_leaving:
+            apart = np.triu((Jm <= 0) & ok[:, None] & ok[None, :], 1)     # [frame, later frame]: no overlap
+            first = np.where(apart.any(axis=1), np.argmax(apart, axis=1), len(queried))
+            earlier &= rank[:, None] >= first[None, :]
         positive = np.any((Jm >= r) & earlier, axis=1)
         hit_queries = set(int(a) for a, jj in zip(q[valid], J) if jj >= r)
         found = np.array([int(f) in hit_queries for f in queried])

@@ -91,7 +91,9 @@ def evaluate_run(out_dir: str | Path, gt_file: str | Path | None = None, alignme
             gt_frames = Trajectory(t_gt, gt).planar_at(frame_t, max_gap=0.5)
             queried = run_info.get("keyframes")
             kw = dict(queried=np.asarray(queried) if queried else None, r=overlap_threshold,
-                      min_separation=int(run_info.get("loop_min_separation", 1)))
+                      min_separation=int(run_info.get("loop_min_separation", 1)), stamps=frame_t,
+                      min_seconds=float(run_info.get("loop_exclude_seconds", 0.0)),
+                      after_leaving=bool(run_info.get("loop_exclude_unleft", False)))
             try:
                 report["loops"] = {"accepted": loop_precision_recall(camera, gt_frames, loops, **kw),
                                    "kept_by_back_end": loop_precision_recall(camera, gt_frames, loops,
