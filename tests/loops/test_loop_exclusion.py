@@ -14,6 +14,7 @@ from loops.recognition import Ranked, Verification
 from odometry.shared.camera import CameraModel
 from odometry.shared.footprint import overlap_pairs
 from odometry.shared.poses import between
+from tests._tools import render_floor_tool
 from vslam.pipeline.motion_gate import ChainMotion, MotionGate
 
 
@@ -119,15 +120,7 @@ def test_the_motion_gate_rejects_a_loop_that_contradicts_the_odometry():
     assert np.allclose(between(odo[0], odo[2]), 0.0)
 
 
-def render_floor() -> Path | None:
-    data = os.environ.get("VSLAM_SHARED_DATA")
-    if not data:
-        return None
-    p = Path(data).parent / "tools" / "render_floor.py"
-    return p if p.exists() else None
-
-
-@pytest.mark.skipif(render_floor() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
+@pytest.mark.skipif(render_floor_tool() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
 def test_standalone_loops_on_a_printed_floor_join_no_non_overlapping_places(tmp_path):
     from vslam.app.loops import detect_sequence_loops
     from vslam.evaluation.loops import read_loops_csv
@@ -135,7 +128,7 @@ def test_standalone_loops_on_a_printed_floor_join_no_non_overlapping_places(tmp_
 
     tex = Path(os.environ["VSLAM_SHARED_DATA"]) / "textures" / "aws_robomaker_mit0" / "house_FloorB_01_wood_planks.png"
     seq_dir = tmp_path / "printed"
-    subprocess.run([sys.executable, str(render_floor()), str(seq_dir), "--textures", str(tex), "--printed",
+    subprocess.run([sys.executable, str(render_floor_tool()), str(seq_dir), "--textures", str(tex), "--printed",
                     "--laps", "2", "--fps", "10", "--seed", "1"], check=True, stdout=subprocess.DEVNULL)
     seq = open_sequence(seq_dir)
     gt = seq.groundtruth_planar()

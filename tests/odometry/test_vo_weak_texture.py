@@ -21,24 +21,16 @@ import pytest
 from odometry.shared.camera import CameraModel
 from odometry.shared.poses import between, wrap_angle
 from odometry.vo import Method, VisualOdometry, VOConfig, VOStatus
+from tests._tools import render_floor_tool
 
-
-def _tool() -> Path | None:
-    data = os.environ.get("VSLAM_SHARED_DATA")
-    if not data:
-        return None
-    p = Path(data).parent / "tools" / "render_floor.py"
-    return p if p.exists() else None
-
-
-pytestmark = pytest.mark.skipif(_tool() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
+pytestmark = pytest.mark.skipif(render_floor_tool() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
 
 W, H, F = 640, 480, 500.0
 
 
 @pytest.fixture(scope="module")
 def views():
-    spec = importlib.util.spec_from_file_location("render_floor_tool", _tool())
+    spec = importlib.util.spec_from_file_location("render_floor_tool", render_floor_tool())
     rf = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(rf)
     tex = Path(os.environ["VSLAM_SHARED_DATA"]) / "textures"
