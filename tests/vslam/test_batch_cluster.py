@@ -150,7 +150,9 @@ def test_batch_on_a_dask_cluster_survives_a_killed_worker_and_resumes(cluster, f
         assert manifest[name]["status"] == "done", manifest[name]
     assert manifest["seq3"]["attempts"] == 2         # the killed worker's sequence was started once more
     assert manifest["seq3"]["pid"] != killed["pid"]
-    assert all(manifest[n]["attempts"] == 1 for n in ("seq0", "seq1", "seq2"))
+    # the others ran once, unless a loaded machine made the scheduler give up on a live worker too (it then
+    # reschedules that worker's task by itself); never more than the limit
+    assert all(1 <= manifest[n]["attempts"] <= 2 for n in ("seq0", "seq1", "seq2"))
     summary = (out / "summary.csv").read_text().splitlines()
     assert summary[0].startswith("name,status,")
     assert len(summary) == 6
