@@ -8,17 +8,12 @@ import pytest
 
 from loops.cdvs import BUDGETS, MODES, DescriptorDecodeError, decode, encode, encode_all_modes
 from loops.cdvs.codec import HEADER_SIZE
+from vslam.bench.fuzz_cases import texture as fuzz_texture
 
 
 def texture(seed: int, h: int = 480, w: int = 640) -> np.ndarray:
-    """Seeded multi-scale noise: a stand-in for a floor texture."""
-    rng = np.random.default_rng(seed)
-    img = np.zeros((h, w), np.float32)
-    for s, a in ((4, 0.5), (16, 1.0), (64, 0.7)):
-        small = rng.random((max(2, h // s), max(2, w // s))).astype(np.float32)
-        img += a * cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
-    img = (img - img.min()) / (img.max() - img.min() + 1e-6)
-    return (img * 230 + 10).astype(np.uint8)
+    """The fuzz cases' seeded multi-scale noise (a stand-in for a floor texture) at the codec's 640x480."""
+    return fuzz_texture(seed, h, w)
 
 
 @pytest.fixture(scope="module")
