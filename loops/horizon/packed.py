@@ -19,6 +19,7 @@ tests check it on real frames); the RANSAC line has no batched form here. Requir
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,32 +115,60 @@ def level_row(horizon: float | HorizonLine) -> float:
         row = float(horizon)
     except (TypeError, ValueError):
         raise HorizonError(f"horizon row must be a number, got {horizon!r}") from None
-    if not np.isfinite(row):
+    if not math.isfinite(row):
         raise HorizonError(f"horizon row must be finite, got {row}")
     return row
 
 
 @dataclass(frozen=True)
 class _BandPlan:
+    """Index tables of one (image size, horizon row, params, image dtype): built once, reused for every frame.
+
+    Candidates: per band, each kept level's positions where its filter fits, levels separated by a zero candidate
+    (response 0, descriptor 0, column 0), bands end to end with a separator first and last in each; the last is
+    the null candidate of an empty slot. A candidate's neighbours in the flat vector are its level's neighbours
+    or a separator, as surf1d's non-fitting candidates.
+    Box-filter sums and each band's padded integral (as surf1d's, for the descriptor look-ups) are linear in the
+    band's signal: one matrix product gives both for every band.
+    """
+
     rows: np.ndarray | None     # (B * band_height,) image rows band after band; None when they are one slice
     r0: int                     # first row of that slice
-    ext_cols: np.ndarray        # (L,) column of the band sums feeding each padded-integral input (W: zero column)
-    resp_flat: np.ndarray       # (B, 4, M) flat look-ups into the (B, L) integral, candidates of the kept levels
-    resp_w: np.ndarray          # (M,)
-    desc_flat: np.ndarray       # (B, M, S + 2) flat look-ups of each candidate's descriptor samples
-    desc_haar: np.ndarray       # surf1d's descriptor matrices (SignalPlan.desc_haar, .desc_abs)
-    desc_abs: np.ndarray
-    x: np.ndarray               # (M,) image column of each candidate
+    acc: type                   # dtype the band sums are accumulated in (exact)
+    lin: np.ndarray             # (n, M + seg + 1) the signal -> [every candidate's box-filter sum | the padded
+    #                             integral], integer coefficients
+    resp_w: np.ndarray          # (B, M) response weight 1 / (lobe * pixels per sample); 0 for a separator
+    desc_t: np.ndarray          # (S + 2, B * M) flat look-ups into lin's output of each candidate's descriptor
+    desc_haar: np.ndarray       # (S + D, S + 2): look-ups -> [Haar responses | weighted sums] (surf1d's, transposed)
+    desc_abs: np.ndarray        # (D, S + D): [Haar responses, abs'd | weighted sums] -> descriptor
+    x: np.ndarray               # (B * M,) image column of each candidate
+    code: np.ndarray            # (B * M - 2,) sort-key low bits of interior flat candidate j + 1: M - 1 - its
+    #                             index in its band (> 0; 0 decodes to M - 1, the band's last separator = null)
+    null: np.ndarray            # (B, 1) b * M + M - 1: flat candidate of sort code 0 in band b
+    low: int                    # 2^bits - 1 > M: the low bits of a sort key that carry the code
+    m: int                      # candidates per band
     n: int
 
 
+_LAST: list = [None]    # (params, height, width, row, dtype, plan) of the last call: no params hashing per frame
+
+
+def _band_plan(height: int, width: int, row: float, params: HorizonParams, dtype: np.dtype) -> _BandPlan:
+    last = _LAST[0]
+    if last is not None and last[0] is params and last[1:5] == (height, width, row, dtype):
+        return last[5]
+    plan = _band_plan_cached(height, width, row, params, dtype)
+    _LAST[0] = (params, height, width, row, dtype, plan)
+    return plan
+
+
 @functools.lru_cache(maxsize=64)
-def _band_plan(height: int, width: int, row: float, params: HorizonParams) -> _BandPlan:
+def _band_plan_cached(height: int, width: int, row: float, params: HorizonParams, dtype: np.dtype) -> _BandPlan:
     n = width // params.step if params.sample_mode is SampleMode.BOX else -(-width // params.step)
     if n < min_signal_length(params):
         raise HorizonError(f"horizon signal too short: {n} samples (image width {width} / step {params.step}); "
                            f"1D SURF needs at least {min_signal_length(params)}")
-    band = params.band_height
+    band, n_bands = params.band_height, params.bands
     starts = []
     for r in band_rows(row, height, params):
         r0 = int(np.floor(r + 0.5)) - band // 2
@@ -149,92 +178,123 @@ def _band_plan(height: int, width: int, row: float, params: HorizonParams) -> _B
         starts.append(r0)
     rows = (np.array(starts)[:, None] + np.arange(band)).ravel()
     contiguous = bool(np.all(np.diff(rows) == 1))
+    box = params.sample_mode is SampleMode.BOX
     plan = signal_plan(n, params)
-    # Levels whose filter never fits the signal give zero responses everywhere: skip them (each kept level keeps
-    # all its candidates, so its first and last still separate it from its neighbours in the flat vector).
-    used = np.unique(plan.cand_level[plan.resp_weight > 0])
-    keep = np.flatnonzero(np.isin(plan.cand_level, used))
-    resp_idx, desc_idx = plan.resp_idx[:, keep], plan.desc_idx[keep]
-    # The padding the kept levels reach (the 1D plan pads for the largest level). Fewer replicated samples shift
-    # every integral value by the same multiple of the first sample; responses and Haar sums are differences
-    # with coefficients summing to 0, so they do not change.
+    # The candidates whose filter fits (the others have response 0), level after level, each level preceded by
+    # a separator and the last followed by one: an extremum test next to a separator compares with 0, as next
+    # to surf1d's non-fitting candidates.
+    fit = np.flatnonzero(plan.resp_weight > 0)
+    level = plan.cand_level[fit]
+    first = np.r_[True, level[1:] != level[:-1]]
+    slots = np.arange(fit.size) + np.cumsum(first)           # candidate index of each fitting one
+    m = fit.size + int(first.sum()) + 1
+    # The padding the fitting candidates reach (the 1D plan pads for the largest level). Fewer replicated samples
+    # shift every integral value by the same multiple of the first sample; responses and Haar sums are
+    # differences with coefficients summing to 0, so they do not change.
+    resp_idx, desc_idx = plan.resp_idx[:, fit], plan.desc_idx[fit]
     lo, hi = min(resp_idx.min(), desc_idx.min()), max(resp_idx.max(), desc_idx.max())
     pad = max(plan.pad - int(lo), int(hi) - plan.pad - n, 1)
+    # Box-filter sums and the padded integral as one matrix on the signal: integral column t is the sum of the
+    # padded samples j < t, padded sample j being sample clip(j - pad); RESP_COEF combines a filter's four look-ups.
+    seg = n + 2 * pad
+    onehot = np.zeros((seg, n))
+    onehot[np.arange(seg), np.clip(np.arange(seg) - pad, 0, n - 1)] = 1.0
+    integ = np.concatenate([np.zeros((n, 1)), np.cumsum(onehot, axis=0).T], axis=1)          # (n, seg + 1)
     delta = plan.pad - pad
-    length = n + 2 * pad + 1
-    sample_col = np.arange(n) * (1 if params.sample_mode is SampleMode.BOX else params.step)
-    src = n if params.sample_mode is SampleMode.BOX else width
-    ext_cols = np.concatenate([[src], np.full(pad, sample_col[0]), sample_col, np.full(pad, sample_col[-1])])
-    band_start = (np.arange(params.bands) * length)[:, None, None]
-    out = _BandPlan(None if contiguous else rows, starts[0], ext_cols.astype(np.intp),
-                    (resp_idx - delta)[None] + band_start, plan.resp_weight[keep], (desc_idx - delta)[None] + band_start,
-                    plan.desc_haar, plan.desc_abs, plan.columns[plan.cand_pos[keep]], n)
-    for a in (rows, out.ext_cols, out.resp_flat, out.resp_w, out.desc_flat, out.x):
+    resp = np.zeros((n, m))
+    resp[:, slots] = np.einsum("k,nkf->nf", RESP_COEF, integ[:, resp_idx - delta])
+    lin = np.concatenate([resp, integ], axis=1)
+    resp_w = np.zeros(m)
+    resp_w[slots] = plan.resp_weight[fit]
+    # Exact in float32 while every sum stays below 2^24 (integer band sums); else float64.
+    sample_max = (255 if dtype == np.uint8 else np.inf) * band * (params.step if box else 1)
+    lin = lin.astype(np.float32 if np.abs(lin).sum(axis=0).max() * sample_max < 2 ** 24 else np.float64)
+    acc = np.uint16 if dtype == np.uint8 and sample_max < 2 ** 16 else lin.dtype.type
+    # Descriptor look-ups into the flat product; separators (and the null candidate) read one value every time:
+    # Haar responses 0, descriptor 0.
+    desc = np.zeros((m, desc_idx.shape[1]), np.intp)
+    desc[slots] = desc_idx - delta + m
+    width_out = m + seg + 1
+    desc_flat = ((np.arange(n_bands) * width_out)[:, None, None] + desc[None]).reshape(n_bands * m, -1)
+    x = np.zeros(m)
+    x[slots] = plan.columns[plan.cand_pos[fit]]
+    d = plan.desc_abs.shape[1]
+    desc_abs = np.concatenate([plan.desc_abs, np.eye(d)])             # |Haar| -> sums |dx|; signed sums as they are
+    code = (m - 1 - np.arange(n_bands * m) % m)[1:-1]
+    out = _BandPlan(None if contiguous else rows, starts[0], acc, lin, np.tile(resp_w, (n_bands, 1)),
+                    np.ascontiguousarray(desc_flat.T), np.ascontiguousarray(plan.desc_haar.T),
+                    np.ascontiguousarray(desc_abs.T), np.tile(x, n_bands),
+                    code.astype(np.int64), (np.arange(n_bands) * m + m - 1)[:, None], (1 << m.bit_length()) - 1,
+                    m, n)
+    for a in (rows, out.lin, out.resp_w, out.desc_t, out.desc_haar, out.desc_abs, out.x, out.code, out.null):
         a.setflags(write=False)
     return out
 
 
 def _band_sums(image: np.ndarray, bp: _BandPlan, params: HorizonParams) -> np.ndarray:
-    """(B, W + 1) column sums of each band (column W is 0), or (B, n + 1) box sums in SampleMode.BOX."""
+    """(B, W) column sums of each band, or (B, n) box sums in SampleMode.BOX."""
     n_bands, band = params.bands, params.band_height
     px = image[bp.r0:bp.r0 + n_bands * band] if bp.rows is None else image[bp.rows]
-    # Integer sums are exact; uint16 holds a band of up to 257 rows of uint8 and is the fastest to accumulate.
-    acc = (np.uint16 if image.dtype == np.uint8 and band * 255 < 2 ** 16 else
-           np.int64 if image.dtype.kind in "ui" else np.float64)
     if params.sample_mode is SampleMode.BOX:
-        sums = np.zeros((n_bands, bp.n + 1), acc)
-        sums[:, :bp.n] = px[:, :bp.n * params.step].reshape(n_bands, band, bp.n, params.step).sum(axis=(1, 3),
-                                                                                                    dtype=acc)
-        return sums
-    width = image.shape[1]
-    sums = np.zeros((n_bands, width + 1), acc)
-    np.add.reduce(px.reshape(n_bands, band, width), axis=1, dtype=acc, out=sums[:, :width])
-    return sums
+        return px[:, :bp.n * params.step].reshape(n_bands, band, bp.n, params.step).sum(axis=(1, 3), dtype=bp.acc)
+    return np.add.reduce(px.reshape(n_bands, band, image.shape[1]), axis=1, dtype=bp.acc)
 
 
 def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonParams) -> PackedBands:
     """Features of the `params.bands` bands around horizon `row` (a level HorizonLine is accepted), the
-    `params.max_features` strongest per band."""
+    `params.max_features` strongest per band.
+
+    About 25 array calls whatever the number of bands (on a small frame their per-call cost is most of the time):
+    band sums; one matrix product for every candidate's box-filter sum and every band's padded integral;
+    extrema by array comparisons on all bands at once; the strongest of each band from one sort; the descriptors
+    from one gather and two matrix products. The features are surf1d's (the tests check it on real frames).
+    """
     k_max = params.max_features
     if k_max <= 0:
         raise HorizonError("the packed path needs max_features > 0 (a fixed number of slots per band)")
-    image = as_gray(np.asarray(image))
+    if image.ndim != 2:
+        image = as_gray(np.asarray(image))
     height, width = image.shape
     row = level_row(row)
     if not 0 <= row <= height - 1:     # bands are moved inside the image at its edges, a horizon is not
         raise HorizonError(f"horizon row {row:g} is outside the image (rows 0..{height - 1})")
-    bp = _band_plan(height, width, row, params)
-    n_bands = params.bands
-    # Padded integral of each band's signal, as surf1d's (edge samples replicated, a leading 0).
-    integral = np.cumsum(_band_sums(image, bp, params)[:, bp.ext_cols], axis=1, dtype=np.float64)
-    r = np.matmul(RESP_COEF, integral.ravel().take(bp.resp_flat))   # (B, M)
-    r *= bp.resp_w
+    bp = _band_plan(height, width, row, params, image.dtype)
+    sums = _band_sums(image, bp, params)
+    sig = sums if params.sample_mode is SampleMode.BOX or params.step == 1 else sums[:, ::params.step]
+    out = np.matmul(sig.astype(bp.lin.dtype), bp.lin)                   # (B, M + seg + 1), integers
+    r = (out[:, :bp.m] * bp.resp_w).ravel()                             # float64, as surf1d
     a = np.abs(r)
-    c = a[:, 1:-1]
-    bi, ci = np.nonzero((c > np.maximum(a[:, :-2], params.threshold)) & (c >= a[:, 2:]))   # band, then position
-    # The k_max strongest of each band (ties: the first position, as surf1d), into slots 0.. in that order.
-    val = c[bi, ci]
-    order = np.argsort(bi * (2.0 * val.max(initial=0.0) + 1.0) - val, kind="stable")
-    bi, ci = bi[order], ci[order]
-    counts = np.bincount(bi, minlength=n_bands)
-    slot = np.arange(bi.size) - (np.cumsum(counts) - counts)[bi]
-    keep = slot < k_max
-    bi, slot, cand = bi[keep], slot[keep], ci[keep] + 1
-    # Descriptors as surf1d.detect_and_describe: integral look-ups -> Haar responses and subregion sums.
-    out = integral.ravel()[bp.desc_flat[bi, cand]] @ bp.desc_haar
-    n_s = bp.desc_abs.shape[0]
-    desc = np.abs(out[:, :n_s]) @ bp.desc_abs
-    desc += out[:, n_s:]
-    desc /= np.sqrt(np.einsum("kd,kd->k", desc, desc) + 1e-24)[:, None]
-    d = desc.shape[1]
-    keys = np.zeros((n_bands, k_max, d + 1), np.float32)
-    keys[bi, slot, :d] = desc
-    keys[bi, slot, d] = np.where(r[bi, cand] > 0, SIGN_WEIGHT, -SIGN_WEIGHT)   # never 0: |r| > threshold >= 0
-    valid = np.zeros((n_bands, k_max), bool)
-    valid[bi, slot] = True
-    x = np.zeros((n_bands, k_max))
-    x[bi, slot] = bp.x[cand]
-    return PackedBands(x, keys, valid, width)
+    c = a[1:-1]
+    # Extrema in space (as surf1d): above the threshold, above the left neighbour, not below the right one.
+    ext = c > np.maximum(a[:-2], params.threshold)
+    ext &= c >= a[2:]
+    # The k_max strongest of each band, strongest first, ties to the first position (surf1d's stable sort), by
+    # one sort of int64 keys: a non-negative float's bit pattern orders as the float; its low bits are replaced
+    # by the candidate's code (strengths closer than about 2^-40 relative count as equal). Not an extremum: key 0.
+    low = bp.low
+    kb = c.view(np.int64) & ~low
+    kb |= bp.code
+    key = np.zeros(params.bands * bp.m, np.int64)
+    np.copyto(key[1:-1], kb, where=ext)
+    top = np.sort(key.reshape(params.bands, bp.m), axis=1)[:, :-k_max - 1:-1]
+    if top.shape[1] < k_max:                                            # fewer candidates than slots
+        top = np.pad(top, ((0, 0), (0, k_max - top.shape[1])))
+    cand = bp.null - (top & low)                                        # (B, K) flat candidates; null if empty
+    # Descriptors as surf1d.detect_and_describe: integral look-ups -> Haar responses and subregion sums; feature
+    # after feature along the last axis, so that the |Haar| rows are one contiguous block.
+    cand = cand.ravel()
+    looks = out.ravel().take(bp.desc_t.take(cand, axis=1)).astype(np.float64)     # (S + 2, B * K)
+    h = bp.desc_haar @ looks
+    n_s = h.shape[0] - bp.desc_abs.shape[0]
+    np.abs(h[:n_s], out=h[:n_s])
+    desc = bp.desc_abs @ h                                              # (D, B * K)
+    norm = np.sqrt(np.einsum("dk,dk->k", desc, desc) + 1e-24)
+    d = desc.shape[0]
+    keys = np.empty((params.bands, k_max, d + 1), np.float32)
+    keys_t = keys.reshape(-1, d + 1).T
+    np.divide(desc, norm, out=keys_t[:d])
+    np.multiply(np.sign(r.take(cand)), SIGN_WEIGHT, out=keys_t[d])      # +-SIGN_WEIGHT; 0 in an empty slot
+    return PackedBands(bp.x.take(cand).reshape(params.bands, k_max), keys, top != 0, width)
 
 
 def stack_packed(views: list[PackedBands]) -> PackedSet:
