@@ -324,7 +324,7 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     keys, xs, enough = stored.keys, stored.x, stored.enough
     if which is not None:
         which = np.asarray(which, np.intp)
-        keys, xs, enough = keys[..., which], xs[..., which], enough[:, which]
+        keys, xs, enough = keys.take(which, axis=3), xs.take(which, axis=2), enough.take(which, axis=1)
     b, d2, ks, p = keys.shape
     kt = test.keys.shape[1]
     if test.keys.shape != (b, ks, d2):
@@ -368,7 +368,7 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     lo = int(matched.min())
     n_bins = int(matched.max()) - lo + 2
     bins -= lo
-    np.clip(bins, 0, n_bins - 1, out=bins)                               # unmatched: any bin, they add 0
+    bins = np.where(ok, bins, 0)                                         # unmatched: any bin, they add 0
     unit = 2.0 ** np.ceil(np.log2(kt / params.min_distance + 1.0))
     w_count = w + unit * ok
     h = np.bincount((h_row * n_bins + bins).ravel(), weights=w_count.ravel(), minlength=b * p * n_bins)
