@@ -340,16 +340,17 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     # d2 >= 10).
     bits = max(1, (ks - 1).bit_length())
     low = (1 << bits) - 1
-    row, x_row, h_row = _match_index(b, kt, ks, p)
-    si = np.bitwise_and(sim.view(np.int32), np.int32(~low)).reshape(b, kt, ks, p)
-    si |= np.arange(ks, dtype=np.int32)[:, None]
-    j1 = si.max(axis=2)
+    row, x_row, h_row, slot_row = _match_index(b, kt, ks, p)
+    # The copy is laid out slot first, (Ks, B, Kt, P): a max over slots is then an elementwise max of Ks
+    # contiguous blocks, several times faster than one along a middle axis.
+    si = np.bitwise_and(sim.view(np.int32).reshape(b, kt, ks, p).transpose(2, 0, 1, 3), np.int32(~low), order="C")
+    si |= np.arange(ks, dtype=np.int32).reshape(ks, 1, 1, 1)
+    j1 = si.max(axis=0)
     j1 &= low                                                            # (B, Kt, P)
-    at1 = row + j1 * p
-    flat_si = si.ravel()
-    flat_si[at1] = np.iinfo(np.int32).min
-    j2 = si.max(axis=2)
+    si.ravel()[slot_row + j1 * (b * kt * p)] = np.iinfo(np.int32).min
+    j2 = si.max(axis=0)
     j2 &= low
+    at1 = row + j1 * p
     flat_sim = sim.ravel()
     s1 = flat_sim[at1]
     d1 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * s1                         # squared descriptor distances
@@ -403,12 +404,14 @@ def _no_consensus(score: float) -> PackedMatch:
 
 
 @functools.lru_cache(maxsize=64)
-def _match_index(b: int, kt: int, ks: int, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _match_index(b: int, kt: int, ks: int, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Flat indices of slot 0 of each (band, test slot, view) in the (B, Kt, Ks, P) similarities, of each (band,
-    view) in the (B, Ks, P) stored columns and in the (B, P, bins) histogram (times its bin count)."""
+    view) in the (B, Ks, P) stored columns and in the (B, P, bins) histogram (times its bin count), and of each
+    (band, test slot, view) in slot 0 of the (Ks, B, Kt, P) copy."""
     row = np.arange(b * kt).reshape(b, kt, 1) * (ks * p) + np.arange(p)
     x_row = np.arange(b).reshape(b, 1, 1) * (ks * p) + np.arange(p)
     h_row = np.arange(b).reshape(b, 1, 1) * p + np.arange(p)
-    for a in (row, x_row, h_row):
+    slot_row = np.arange(b * kt * p).reshape(b, kt, p)
+    for a in (row, x_row, h_row, slot_row):
         a.setflags(write=False)
-    return row, x_row, h_row
+    return row, x_row, h_row, slot_row
