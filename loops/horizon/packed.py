@@ -59,8 +59,8 @@ class PackedBands:
 
 @dataclass(frozen=True)
 class PackedSet:
-    """P stored views side by side: keys (B, D + 1, K, P) for the similarity product, x (B, K, P), enough (B, P):
-    the band holds at least two features (a nearest and a second nearest exist)."""
+    """P stored views side by side: keys (B, K, P, D + 1) for the similarity product (slot, then view, along its
+    rows), x (B, K, P), enough (B, P): the band holds at least two features (a nearest and a second nearest exist)."""
 
     keys: np.ndarray
     x: np.ndarray
@@ -138,8 +138,9 @@ class _BandPlan:
     lin: np.ndarray             # (n, M + seg + 1) the signal -> [every candidate's box-filter sum | the padded
     #                             integral], integer coefficients
     resp_w: np.ndarray          # (B, M) response weight 1 / (lobe * pixels per sample); 0 for a separator
-    desc_t: np.ndarray          # (S + 2, B * M) flat look-ups into lin's output of each candidate's descriptor
-    desc_haar: np.ndarray       # (S + D, S + 2): look-ups -> [Haar responses | weighted sums] (surf1d's, transposed)
+    desc_t: np.ndarray          # (S + 3, B * M) flat look-ups into lin's output of each candidate's descriptor
+    #                             samples, then of its box-filter sum
+    desc_haar: np.ndarray       # (S + D + 1, S + 3): look-ups -> [Haar responses | weighted sums | box-filter sum]
     desc_abs: np.ndarray        # (D, S + D): [Haar responses, abs'd | weighted sums] -> descriptor
     x: np.ndarray               # (B * M,) image column of each candidate
     code: np.ndarray            # (B * M - 2,) sort-key low bits of interior flat candidate j + 1: M - 1 - its
@@ -212,17 +213,21 @@ def _band_plan_cached(height: int, width: int, row: float, params: HorizonParams
     acc = np.uint16 if dtype == np.uint8 and sample_max < 2 ** 16 else lin.dtype.type
     # Descriptor look-ups into the flat product; separators (and the null candidate) read one value every time:
     # Haar responses 0, descriptor 0.
-    desc = np.zeros((m, desc_idx.shape[1]), np.intp)
-    desc[slots] = desc_idx - delta + m
+    desc = np.zeros((m, desc_idx.shape[1] + 1), np.intp)
+    desc[slots, :-1] = desc_idx - delta + m
+    desc[slots, -1] = slots                                             # the candidate's box-filter sum in lin's output
     width_out = m + seg + 1
     desc_flat = ((np.arange(n_bands) * width_out)[:, None, None] + desc[None]).reshape(n_bands * m, -1)
     x = np.zeros(m)
     x[slots] = plan.columns[plan.cand_pos[fit]]
     d = plan.desc_abs.shape[1]
     desc_abs = np.concatenate([plan.desc_abs, np.eye(d)])             # |Haar| -> sums |dx|; signed sums as they are
+    desc_haar = np.zeros((plan.desc_haar.shape[0] + 1, plan.desc_haar.shape[1] + 1))
+    desc_haar[:-1, :-1] = plan.desc_haar
+    desc_haar[-1, -1] = 1.0                                             # the box-filter sum, passed through
     code = (m - 1 - np.arange(n_bands * m) % m)[1:-1]
     out = _BandPlan(None if contiguous else rows, starts[0], acc, lin, np.tile(resp_w, (n_bands, 1)),
-                    np.ascontiguousarray(desc_flat.T), np.ascontiguousarray(plan.desc_haar.T),
+                    np.ascontiguousarray(desc_flat.T), np.ascontiguousarray(desc_haar.T),
                     np.ascontiguousarray(desc_abs.T), np.tile(x, n_bands),
                     code.astype(np.int64), (np.arange(n_bands) * m + m - 1)[:, None], (1 << m.bit_length()) - 1,
                     m, n)
@@ -283,17 +288,17 @@ def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonP
     # Descriptors as surf1d.detect_and_describe: integral look-ups -> Haar responses and subregion sums; feature
     # after feature along the last axis, so that the |Haar| rows are one contiguous block.
     cand = cand.ravel()
-    looks = out.ravel().take(bp.desc_t.take(cand, axis=1)).astype(np.float64)     # (S + 2, B * K)
-    h = bp.desc_haar @ looks
-    n_s = h.shape[0] - bp.desc_abs.shape[0]
+    # The last row of h is the candidate's box-filter sum (its sign is the blob's).
+    h = bp.desc_haar @ out.ravel().take(bp.desc_t.take(cand, axis=1)).astype(np.float64)   # (S + D + 1, B * K)
+    n_s = bp.desc_abs.shape[1] - bp.desc_abs.shape[0]
     np.abs(h[:n_s], out=h[:n_s])
-    desc = bp.desc_abs @ h                                              # (D, B * K)
-    norm = np.sqrt(np.einsum("dk,dk->k", desc, desc) + 1e-24)
+    desc = bp.desc_abs @ h[:-1]                                         # (D, B * K)
+    norm = np.sqrt(np.add.reduce(desc * desc, axis=0) + 1e-24)
     d = desc.shape[0]
     keys = np.empty((params.bands, k_max, d + 1), np.float32)
     keys_t = keys.reshape(-1, d + 1).T
     np.divide(desc, norm, out=keys_t[:d])
-    np.multiply(np.sign(r.take(cand)), SIGN_WEIGHT, out=keys_t[d])      # +-SIGN_WEIGHT; 0 in an empty slot
+    np.multiply(np.sign(h[-1]), SIGN_WEIGHT, out=keys_t[d])             # +-SIGN_WEIGHT; 0 in an empty slot
     return PackedBands(bp.x.take(cand).reshape(params.bands, k_max), keys, top != 0, width)
 
 
@@ -304,7 +309,7 @@ def stack_packed(views: list[PackedBands]) -> PackedSet:
     shapes = {v.keys.shape for v in views}
     if len(shapes) > 1:
         raise HorizonError(f"views of different bands / max_features cannot be stacked: key shapes {sorted(shapes)}")
-    keys = np.ascontiguousarray(np.stack([v.keys for v in views], axis=3).transpose(0, 2, 1, 3))   # (B, D2, K, P)
+    keys = np.stack([v.keys for v in views], axis=2)                    # (B, K, P, D2)
     valid = np.stack([v.valid for v in views], axis=2)                  # (B, K, P)
     x = np.stack([v.x for v in views], axis=2)
     return PackedSet(keys, x, valid.sum(axis=1) >= 2)
@@ -324,15 +329,17 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     keys, xs, enough = stored.keys, stored.x, stored.enough
     if which is not None:
         which = np.asarray(which, np.intp)
-        keys, xs, enough = keys.take(which, axis=3), xs.take(which, axis=2), enough.take(which, axis=1)
-    b, d2, ks, p = keys.shape
+        keys, xs, enough = keys.take(which, axis=2), xs.take(which, axis=2), enough.take(which, axis=1)
+    b, ks, p, d2 = keys.shape
     kt = test.keys.shape[1]
     if test.keys.shape != (b, ks, d2):
         raise HorizonError(f"test view of key shape {test.keys.shape} against stored views of {(b, ks, d2)}: "
                            "they come from different bands / max_features")
     if p == 0:
         return PackedScores(np.zeros(0), np.zeros(0), [] if details else None)
-    sim = np.matmul(test.keys, keys.reshape(b, d2, ks * p))              # (B, Kt, Ks * P)
+    # Every stored slot of every view against every test feature of the band, laid out (B, Ks, P, Kt): a max over
+    # the stored slots is then an elementwise max of Ks contiguous (P, Kt) blocks per band.
+    sim = np.matmul(keys.reshape(b, ks * p, d2), test.keys.transpose(0, 2, 1))   # (B, Ks * P, Kt)
     # Nearest and second nearest slot in two max passes over a copy whose low mantissa bits carry the slot index;
     # their exact similarities are then read from sim. Non-negative floats order as their int32 bit patterns, and
     # every negative one (opposite sign) is below them: the nearest is right whenever it is a match (> 0), and a
@@ -340,31 +347,30 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     # d2 >= 10).
     bits = max(1, (ks - 1).bit_length())
     low = (1 << bits) - 1
-    row, x_row, h_row, slot_row = _match_index(b, kt, ks, p)
-    # The copy is laid out slot first, (Ks, B, Kt, P): a max over slots is then an elementwise max of Ks
-    # contiguous blocks, several times faster than one along a middle axis.
-    si = np.bitwise_and(sim.view(np.int32).reshape(b, kt, ks, p).transpose(2, 0, 1, 3), np.int32(~low), order="C")
-    si |= np.arange(ks, dtype=np.int32).reshape(ks, 1, 1, 1)
-    j1 = si.max(axis=0)
-    j1 &= low                                                            # (B, Kt, P)
-    si.ravel()[slot_row + j1 * (b * kt * p)] = np.iinfo(np.int32).min
-    j2 = si.max(axis=0)
+    row, x_row, h_row = _match_index(b, kt, ks, p)
+    si = np.bitwise_and(sim.view(np.int32), np.int32(~low)).reshape(b, ks, p, kt)
+    si |= np.arange(ks, dtype=np.int32).reshape(ks, 1, 1)
+    j1 = si.max(axis=1)
+    j1 &= low                                                            # (B, P, Kt)
+    at1 = row + j1 * (p * kt)                                            # flat (b, j1, v, t) in sim and si
+    si.ravel()[at1] = np.iinfo(np.int32).min
+    j2 = si.max(axis=1)
     j2 &= low
-    at1 = row + j1 * p
     flat_sim = sim.ravel()
     s1 = flat_sim[at1]
     d1 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * s1                         # squared descriptor distances
-    d2 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * flat_sim[row + j2 * p]
+    d2 = 2.0 + 2.0 * SIGN_WEIGHT ** 2 - 2.0 * flat_sim[row + j2 * (p * kt)]
     ok = d1 < (params.ratio ** 2) * d2
     ok &= s1 > 0.0
-    ok &= test.valid[:, :, None] & enough[:, None, :]
+    ok &= test.valid[:, None, :] & enough[:, :, None]
     w = ok / np.sqrt(np.maximum(d1, params.min_distance ** 2))          # 1 / max(distance, min_distance), or 0
-    nn = w.sum(axis=(0, 1))
+    nn = w.sum(axis=(0, 2))
     if not ok.any():
         return PackedScores(nn, np.zeros(p), [_no_consensus(nn[v]) for v in range(p)] if details else None)
     # The shift histogram of every (band, view) in one bincount; each match adds its weight plus `unit`, so a
     # window's count and weight come out of the same sum (weights of one band sum to less than unit).
-    bins = shift_bins(test.x[:, :, None] - xs.ravel()[x_row + j1 * p], params)
+    x_stored = xs.ravel()[x_row + j1 * p]                                # (B, P, Kt): x of each nearest
+    bins = shift_bins(test.x[:, None, :] - x_stored, params)
     matched = bins[ok]
     lo = int(matched.min())
     n_bins = int(matched.max()) - lo + 2
@@ -383,18 +389,17 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
         return PackedScores(nn, consensus)
     # The consensus matches: those in each (band, view)'s heaviest window, when it qualified.
     k = hw.argmax(axis=2)                                                # (B, P)
-    k = np.where(hw.max(axis=2) > 0, k, -2)[:, None, :]                  # -2: no window (no bin is -2 or -1)
-    inl = ok & ((bins == k) | (bins == k + 1))                           # (B, Kt, P)
-    x_test = np.broadcast_to(test.x[:, :, None], inl.shape)
-    x_stored = xs.ravel()[x_row + j1 * p]
+    k = np.where(hw.max(axis=2) > 0, k, -2)[:, :, None]                  # -2: no window (no bin is -2 or -1)
+    inl = ok & ((bins == k) | (bins == k + 1))                           # (B, P, Kt)
+    x_test = np.broadcast_to(test.x[:, None, :], inl.shape)
     band = np.broadcast_to(np.arange(b)[:, None, None], inl.shape)
     out = []
     for v in range(p):
-        m = inl[..., v]
-        xt, xv = x_test[..., v][m], x_stored[..., v][m]
+        m = inl[:, v]
+        xt, xv = x_test[:, v][m], x_stored[:, v][m]
         b_d = float(np.mean(xt - xv)) if m.any() else float("nan")
         out.append(PackedMatch(float(nn[v]), float(consensus[v]), 1.0 if m.any() else float("nan"), b_d, xt, xv,
-                               band[..., v][m]))
+                               band[:, v][m]))
     return PackedScores(nn, consensus, out)
 
 
@@ -404,14 +409,12 @@ def _no_consensus(score: float) -> PackedMatch:
 
 
 @functools.lru_cache(maxsize=64)
-def _match_index(b: int, kt: int, ks: int, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Flat indices of slot 0 of each (band, test slot, view) in the (B, Kt, Ks, P) similarities, of each (band,
-    view) in the (B, Ks, P) stored columns and in the (B, P, bins) histogram (times its bin count), and of each
-    (band, test slot, view) in slot 0 of the (Ks, B, Kt, P) copy."""
-    row = np.arange(b * kt).reshape(b, kt, 1) * (ks * p) + np.arange(p)
-    x_row = np.arange(b).reshape(b, 1, 1) * (ks * p) + np.arange(p)
-    h_row = np.arange(b).reshape(b, 1, 1) * p + np.arange(p)
-    slot_row = np.arange(b * kt * p).reshape(b, kt, p)
-    for a in (row, x_row, h_row, slot_row):
+def _match_index(b: int, kt: int, ks: int, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat indices of slot 0 of each (band, view, test slot) in the (B, Ks, P, Kt) similarities, of each (band,
+    view) in the (B, Ks, P) stored columns and in the (B, P, bins) histogram (times its bin count)."""
+    row = np.arange(b).reshape(b, 1, 1) * (ks * p * kt) + np.arange(p * kt).reshape(1, p, kt)
+    x_row = np.arange(b).reshape(b, 1, 1) * (ks * p) + np.arange(p).reshape(1, p, 1)
+    h_row = np.arange(b).reshape(b, 1, 1) * p + np.arange(p).reshape(1, p, 1)
+    for a in (row, x_row, h_row):
         a.setflags(write=False)
-    return row, x_row, h_row, slot_row
+    return row, x_row, h_row
