@@ -54,6 +54,23 @@ def test_packed_extraction_gives_the_reference_features(row):
         same_features(extract_packed(img, row, FAST), extract_bands(img, row, FAST))
 
 
+@pytest.mark.parametrize("over", [{}, {"step": 1}, {"bands": 1, "threshold": 0.0}, {"max_features": 400},
+                                  {"sample_mode": "box", "step": 4, "band_height": 30}])
+def test_lone_preset_and_other_settings_give_the_reference_features(over):
+    # lone: three 16-row bands every 4 columns; max_features 400 exceeds the candidates of a 160-px frame (the
+    # slots past them stay empty); box sampling over 4 x 30 pixels no longer fits the 16-bit accumulator.
+    p = HorizonParams.preset("lone").replace(**over)
+    for seed in range(3):
+        img = scene(seed)
+        same_features(extract_packed(img, 60.0, p), extract_bands(img, 60.0, p))
+
+
+def test_a_float_image_gives_the_reference_features():
+    img = scene(6).astype(np.float32) / 255.0 * 100.0     # not integers: the float64 path
+    p = FAST.replace(threshold=0.1)
+    same_features(extract_packed(img, 60.0, p), extract_bands(img, 60.0, p))
+
+
 def test_overlapping_bands_of_a_low_image_give_the_reference_features():
     img = scene(2)[:40]                            # seven 12-row bands overlap inside 40 rows
     same_features(extract_packed(img, 20.0, FAST), extract_bands(img, 20.0, FAST))
@@ -110,6 +127,14 @@ def test_real_frames_give_the_reference_features_and_scores(shared_data):
     got = match_packed(packed[0], stack_packed(packed[2:]), FAST)
     np.testing.assert_allclose(got.score, ref_nn, rtol=1e-5)
     np.testing.assert_allclose(got.score_ransac, ref_cons, rtol=1e-5)
+    lone = HorizonParams.preset("lone")
+    for img in imgs:
+        same_features(extract_packed(img, 60.0, lone), extract_bands(img, 60.0, lone))
+    lone_nn, lone_cons = reference_scores(imgs[2], imgs[:2] + imgs[3:], 60.0, lone)
+    sub = match_packed(extract_packed(imgs[2], 60.0, lone),
+                       stack_packed([extract_packed(i, 60.0, lone) for i in imgs[:2] + imgs[3:]]), lone, [2, 0])
+    np.testing.assert_allclose(sub.score, lone_nn[[2, 0]], rtol=1e-5)
+    np.testing.assert_allclose(sub.score_ransac, lone_cons[[2, 0]], rtol=1e-5)
     # Reference place 10 is query place 10 or 11 (the traverses are aligned), not query place 90.
     assert min(got.score_ransac[:2]) > got.score_ransac[2]
 

@@ -36,6 +36,8 @@ from vslam.bench.horizon_real import OrbRansac
 from vslam.evaluation.tables import format_table
 
 ORB = "ORB(1000) + RANSAC, native size"
+EXTRACT_CALLS = 33   # array operations in one extract_packed (loops/horizon/packed.py, COLUMN sampling, step > 1)
+MATCH_CALLS = 60     # array operations in one match_packed call with `which` (whatever the number of views)
 BLOCK = 16   # images or test views per block: the methods take turns block by block
 
 
@@ -58,11 +60,26 @@ class _Measured:
     match_us: dict[str, np.ndarray]                # method -> (P,) matching us charged to each pair
     all_us: dict[str, dict[str, float]]            # packed method -> test image -> us / pair against every view
     stack_us: dict[str, float]                     # packed method -> building the stored set, us per stored view
+    call_us: float                                 # one trivial array call (the per-call floor), median
 
 
 def fast_name(params: HorizonParams, preset: str = "fast") -> str:
     return (f"1D SURF packed, preset {preset} ({params.bands} bands, {params.max_features} features / band, "
             f"step {params.step}, shift consensus)")
+
+
+def _trivial_calls(clock, n: int = 8, per: int = 16) -> list[float]:
+    """Thread time of a trivial array call (np.add of two 16-element arrays), us each, from n runs of `per` calls
+    (so the clock's own cost is spread): the per-call cost that bounds a method made of a few dozen array
+    operations on small arrays."""
+    a, b = np.ones(16), np.ones(16)
+    out = []
+    for _ in range(n):
+        t0 = clock()
+        for _ in range(per):
+            np.add(a, b)
+        out.append((clock() - t0) / 1e3 / per)
+    return out
 
 
 def _turns(methods: list, i: int) -> list:
@@ -86,7 +103,9 @@ def _measure(ps: PairSet, packed: dict[str, HorizonParams]) -> _Measured:
     extractors = {ORB: lambda im, row: orb.extract(im)}
     for name, params in packed.items():
         extractors[name] = functools.partial(lambda im, row, p: extract_packed(im, row, p), p=params)
+    calls: list[float] = []
     for i, block in enumerate(_blocks(list(ps.images))):
+        calls += _trivial_calls(clock)
         for method in _turns(methods, i):
             for name in block:
                 t0 = clock()
@@ -131,7 +150,7 @@ def _measure(ps: PairSet, packed: dict[str, HorizonParams]) -> _Measured:
     for i, block in enumerate(_blocks(list(groups))):
         for method in _turns(methods, i):
             orb_block(block) if method == ORB else packed_block(method, block)
-    return _Measured(scores, ext, match_us, all_us, stack_us)
+    return _Measured(scores, ext, match_us, all_us, stack_us, float(np.median(calls)))
 
 
 def _half_figures(ps: PairSet, m: _Measured, method: str, sel: np.ndarray) -> dict:
@@ -174,4 +193,9 @@ def compare(ps: PairSet, packed: dict[str, HorizonParams], halves: dict[str, int
     table = format_table(["half", "method", "pairs", "AUC", *(f"{n}, us" for n in names)], rows, floatfmt=".3g")
     ratios = format_table(["half", "preset", "AUC, packed - ORB", *(f"ORB / packed, {n}" for n in names)],
                           ratio_rows, floatfmt=".3g")
-    return f"{table}\n\n{ratios}", res
+    res["trivial_call_us"] = m.call_us
+    floor = (f"One trivial array call (np.add of two 16-element arrays, timed between the blocks of this run): "
+             f"{m.call_us:.2g} us median. A packed extraction is {EXTRACT_CALLS} array operations, a packed "
+             f"matching call {MATCH_CALLS} (shared by its candidates): at that cost alone a strict pair with about 9 "
+             f"candidates per test view is >= {m.call_us * (2 * EXTRACT_CALLS + MATCH_CALLS / 9):.2g} us.")
+    return f"{table}\n\n{ratios}\n\n{floor}", res
