@@ -143,8 +143,8 @@ class _BandPlan:
     desc_haar: np.ndarray       # (S + D + 1, S + 3): look-ups -> [Haar responses | weighted sums | box-filter sum]
     desc_abs: np.ndarray        # (D, S + D): [Haar responses, abs'd | weighted sums] -> descriptor
     x: np.ndarray               # (B * M,) image column of each candidate
-    code: np.ndarray            # (B * M - 2,) sort-key low bits of interior flat candidate j + 1: M - 1 - its
-    #                             index in its band (> 0; 0 decodes to M - 1, the band's last separator = null)
+    code: np.ndarray            # (B * M,) sort-key low bits of flat candidate j: M - 1 - its index in its band
+    #                             (0 decodes to M - 1, the band's last separator = the null candidate)
     null: np.ndarray            # (B, 1) b * M + M - 1: flat candidate of sort code 0 in band b
     low: int                    # 2^bits - 1 > M: the low bits of a sort key that carry the code
     m: int                      # candidates per band
@@ -225,7 +225,7 @@ def _band_plan_cached(height: int, width: int, row: float, params: HorizonParams
     desc_haar = np.zeros((plan.desc_haar.shape[0] + 1, plan.desc_haar.shape[1] + 1))
     desc_haar[:-1, :-1] = plan.desc_haar
     desc_haar[-1, -1] = 1.0                                             # the box-filter sum, passed through
-    code = (m - 1 - np.arange(n_bands * m) % m)[1:-1]
+    code = m - 1 - np.arange(n_bands * m) % m
     out = _BandPlan(None if contiguous else rows, starts[0], acc, lin, np.tile(resp_w, (n_bands, 1)),
                     np.ascontiguousarray(desc_flat.T), np.ascontiguousarray(desc_haar.T),
                     np.ascontiguousarray(desc_abs.T), np.tile(x, n_bands),
@@ -234,15 +234,6 @@ def _band_plan_cached(height: int, width: int, row: float, params: HorizonParams
     for a in (rows, out.lin, out.resp_w, out.desc_t, out.desc_haar, out.desc_abs, out.x, out.code, out.null):
         a.setflags(write=False)
     return out
-
-
-def _band_sums(image: np.ndarray, bp: _BandPlan, params: HorizonParams) -> np.ndarray:
-    """(B, W) column sums of each band, or (B, n) box sums in SampleMode.BOX."""
-    n_bands, band = params.bands, params.band_height
-    px = image[bp.r0:bp.r0 + n_bands * band] if bp.rows is None else image[bp.rows]
-    if params.sample_mode is SampleMode.BOX:
-        return px[:, :bp.n * params.step].reshape(n_bands, band, bp.n, params.step).sum(axis=(1, 3), dtype=bp.acc)
-    return np.add.reduce(px.reshape(n_bands, band, image.shape[1]), axis=1, dtype=bp.acc)
 
 
 def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonParams) -> PackedBands:
@@ -264,12 +255,17 @@ def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonP
     if not 0 <= row <= height - 1:     # bands are moved inside the image at its edges, a horizon is not
         raise HorizonError(f"horizon row {row:g} is outside the image (rows 0..{height - 1})")
     bp = _band_plan(height, width, row, params, image.dtype)
-    sums = _band_sums(image, bp, params)
-    sig = sums if params.sample_mode is SampleMode.BOX or params.step == 1 else sums[:, ::params.step]
+    n_bands, band = params.bands, params.band_height
+    px = image[bp.r0:bp.r0 + n_bands * band] if bp.rows is None else image[bp.rows]
+    if params.sample_mode is SampleMode.BOX:     # (B, n) box sums
+        sig = px[:, :bp.n * params.step].reshape(n_bands, band, bp.n, params.step).sum(axis=(1, 3), dtype=bp.acc)
+    else:                                        # (B, W) column sums, every step-th the signal
+        sig = np.add.reduce(px.reshape(n_bands, band, width), axis=1, dtype=bp.acc)[:, ::params.step]
     out = np.matmul(sig.astype(bp.lin.dtype), bp.lin)                   # (B, M + seg + 1), integers
-    r = (out[:, :bp.m] * bp.resp_w).ravel()                             # float64, as surf1d
-    a = np.abs(r)
+    # |response| of every candidate, float64 as surf1d, between two zeros (the flat vector's outer neighbours).
+    a = np.zeros(params.bands * bp.m + 2)
     c = a[1:-1]
+    np.abs(np.multiply(out[:, :bp.m], bp.resp_w).ravel(), out=c)
     # Extrema in space (as surf1d): above the threshold, above the left neighbour, not below the right one.
     ext = c > np.maximum(a[:-2], params.threshold)
     ext &= c >= a[2:]
@@ -277,11 +273,10 @@ def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonP
     # one sort of int64 keys: a non-negative float's bit pattern orders as the float; its low bits are replaced
     # by the candidate's code (strengths closer than about 2^-40 relative count as equal). Not an extremum: key 0.
     low = bp.low
-    kb = c.view(np.int64) & ~low
-    kb |= bp.code
-    key = np.zeros(params.bands * bp.m, np.int64)
-    np.copyto(key[1:-1], kb, where=ext)
-    top = np.sort(key.reshape(params.bands, bp.m), axis=1)[:, :-k_max - 1:-1]
+    key = c.view(np.int64) & ~low
+    key |= bp.code
+    key = np.where(ext, key, 0).reshape(params.bands, bp.m)
+    top = np.sort(key, axis=1)[:, :-k_max - 1:-1]
     if top.shape[1] < k_max:                                            # fewer candidates than slots
         top = np.pad(top, ((0, 0), (0, k_max - top.shape[1])))
     cand = bp.null - (top & low)                                        # (B, K) flat candidates; null if empty
