@@ -22,6 +22,7 @@ import functools
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from loops.horizon.bands import band_rows
@@ -129,18 +130,21 @@ class _BandPlan:
     the null candidate of an empty slot. A candidate's neighbours in the flat vector are its level's neighbours
     or a separator, as surf1d's non-fitting candidates.
     Box-filter sums and each band's padded integral (as surf1d's, for the descriptor look-ups) are linear in the
-    band's signal: one matrix product gives both for every band.
+    band's signal: for a short signal one matrix product gives both for every band; a long one (the product grows
+    with its square) goes through one integral of all bands and a gather.
     """
 
     rows: np.ndarray | None     # (B * band_height,) image rows band after band; None when they are one slice
     r0: int                     # first row of that slice
     acc: type                   # dtype the band sums are accumulated in (exact)
-    lin: np.ndarray             # (n, M + seg + 1) the signal -> [every candidate's box-filter sum | the padded
-    #                             integral], integer coefficients
+    lin: np.ndarray | None      # (n, M + seg + 1) the signal -> [every candidate's box-filter sum | the padded
+    #                             integral], integer coefficients (short signals; None: the gather path)
+    ext: np.ndarray | None      # (B * seg,) gather path: flat index into the band sums of each padded sample
+    resp_flat: np.ndarray | None  # (4, B * M) gather path: integral look-ups of every candidate's box filter
     resp_w: np.ndarray          # (B, M) response weight 1 / (lobe * pixels per sample); 0 for a separator
-    desc_t: np.ndarray          # (S + 3, B * M) flat look-ups into lin's output of each candidate's descriptor
-    #                             samples, then of its box-filter sum
-    desc_haar: np.ndarray       # (S + D + 1, S + 3): look-ups -> [Haar responses | weighted sums | box-filter sum]
+    desc_t: np.ndarray          # (S + 2 + R, B * M) flat look-ups of each candidate's descriptor samples, then of
+    #                             its box-filter sum (lin's output: R = 1; the flat integral: R = 4)
+    desc_haar: np.ndarray       # (S + D + 1, S + 2 + R): look-ups -> [Haar responses | weighted sums | box sum]
     desc_abs: np.ndarray        # (D, S + D): [Haar responses, abs'd | weighted sums] -> descriptor
     x: np.ndarray               # (B * M,) image column of each candidate
     code: np.ndarray            # (B * M,) sort-key low bits of flat candidate j: M - 1 - its index in its band
@@ -151,6 +155,10 @@ class _BandPlan:
     n: int
 
 
+# Multiply-adds per band of the dense product above which the gather path is used: the two cost the same between
+# 61k (a 240-px frame with preset fast, 480 px with lone) and 106k (320 / 640 px) on our 2-core test machine with
+# single-threaded BLAS; a 160-px frame is 25k (fast) / 6k (lone), a 640-px crop 410k / 106k.
+DENSE_MAX = 80_000
 _LAST: list = [None]    # (params, height, width, row, dtype, plan) of the last call: no params hashing per frame
 
 
@@ -195,44 +203,69 @@ def _band_plan_cached(height: int, width: int, row: float, params: HorizonParams
     resp_idx, desc_idx = plan.resp_idx[:, fit], plan.desc_idx[fit]
     lo, hi = min(resp_idx.min(), desc_idx.min()), max(resp_idx.max(), desc_idx.max())
     pad = max(plan.pad - int(lo), int(hi) - plan.pad - n, 1)
-    # Box-filter sums and the padded integral as one matrix on the signal: integral column t is the sum of the
-    # padded samples j < t, padded sample j being sample clip(j - pad); RESP_COEF combines a filter's four look-ups.
     seg = n + 2 * pad
-    onehot = np.zeros((seg, n))
-    onehot[np.arange(seg), np.clip(np.arange(seg) - pad, 0, n - 1)] = 1.0
-    integ = np.concatenate([np.zeros((n, 1)), np.cumsum(onehot, axis=0).T], axis=1)          # (n, seg + 1)
     delta = plan.pad - pad
-    resp = np.zeros((n, m))
-    resp[:, slots] = np.einsum("k,nkf->nf", RESP_COEF, integ[:, resp_idx - delta])
-    lin = np.concatenate([resp, integ], axis=1)
     resp_w = np.zeros(m)
     resp_w[slots] = plan.resp_weight[fit]
-    # Exact in float32 while every sum stays below 2^24 (integer band sums); else float64.
     sample_max = (255 if dtype == np.uint8 else np.inf) * band * (params.step if box else 1)
-    lin = lin.astype(np.float32 if np.abs(lin).sum(axis=0).max() * sample_max < 2 ** 24 else np.float64)
-    acc = np.uint16 if dtype == np.uint8 and sample_max < 2 ** 16 else lin.dtype.type
-    # Descriptor look-ups into the flat product; separators (and the null candidate) read one value every time:
-    # Haar responses 0, descriptor 0.
-    desc = np.zeros((m, desc_idx.shape[1] + 1), np.intp)
-    desc[slots, :-1] = desc_idx - delta + m
-    desc[slots, -1] = slots                                             # the candidate's box-filter sum in lin's output
-    width_out = m + seg + 1
-    desc_flat = ((np.arange(n_bands) * width_out)[:, None, None] + desc[None]).reshape(n_bands * m, -1)
+    n_look = desc_idx.shape[1]
+    if n * (m + seg + 1) <= DENSE_MAX:
+        # Box-filter sums and the padded integral as one matrix on the signal: integral column t is the sum of the
+        # padded samples j < t, padded sample j being sample clip(j - pad); RESP_COEF combines a filter's four
+        # look-ups. Exact in float32 while every sum stays below 2^24 (integer band sums); else float64.
+        onehot = np.zeros((seg, n))
+        onehot[np.arange(seg), np.clip(np.arange(seg) - pad, 0, n - 1)] = 1.0
+        integ = np.concatenate([np.zeros((n, 1)), np.cumsum(onehot, axis=0).T], axis=1)      # (n, seg + 1)
+        resp = np.zeros((n, m))
+        resp[:, slots] = np.einsum("k,nkf->nf", RESP_COEF, integ[:, resp_idx - delta])
+        lin = np.concatenate([resp, integ], axis=1)
+        lin = lin.astype(np.float32 if np.abs(lin).sum(axis=0).max() * sample_max < 2 ** 24 else np.float64)
+        acc = np.uint16 if dtype == np.uint8 and sample_max < 2 ** 16 else lin.dtype.type
+        ext = resp_flat = None
+        # Descriptor look-ups into the flat product, then the candidate's box-filter sum (coefficient 1).
+        stride, first = m + seg + 1, m
+        sum_look, sum_coef = slots[:, None], np.ones(1)
+    else:
+        # Long signals: the dense product grows with n^2; the bands' padded signals end to end in one flat vector
+        # (band b at b * seg), one cv2.integral over it (each band's integral differs from surf1d's by a constant,
+        # which the zero-sum look-ups cancel), every box-filter sum from one gather of four look-ups.
+        lin = None
+        acc = np.uint16 if dtype == np.uint8 and sample_max < 2 ** 16 else np.float64
+        src = np.clip(np.arange(seg) - pad, 0, n - 1) * (1 if box else params.step)
+        ext = (np.arange(n_bands)[:, None] * (n if box else width) + src).ravel().astype(np.intp)
+        look = np.zeros((4, m), np.intp)
+        look[:, slots] = resp_idx - delta
+        resp_flat = (look[:, None, :] + (np.arange(n_bands) * seg)[None, :, None]).reshape(4, -1).astype(np.intp)
+        stride, first = seg, 0
+        sum_look, sum_coef = (resp_idx - delta).T, RESP_COEF
+    # Descriptor look-ups; separators (and the null candidate) read flat value 0 every time, which is 0 (the first
+    # band's first box-filter sum, or the integral's leading 0): Haar responses, descriptor and box-filter sum 0
+    # exactly (the descriptor's coefficients do not sum to exactly 0 in floating point).
+    desc = np.zeros((m, n_look + sum_coef.size), np.intp)
+    desc[slots, :n_look] = desc_idx - delta + first
+    desc[slots, n_look:] = sum_look
+    desc_flat = (np.arange(n_bands) * stride)[:, None, None] + desc[None]
+    sep = np.ones(m, bool)
+    sep[slots] = False
+    desc_flat[:, sep] = 0
+    desc_flat = desc_flat.reshape(n_bands * m, -1)
     x = np.zeros(m)
     x[slots] = plan.columns[plan.cand_pos[fit]]
     d = plan.desc_abs.shape[1]
     desc_abs = np.concatenate([plan.desc_abs, np.eye(d)])             # |Haar| -> sums |dx|; signed sums as they are
-    desc_haar = np.zeros((plan.desc_haar.shape[0] + 1, plan.desc_haar.shape[1] + 1))
-    desc_haar[:-1, :-1] = plan.desc_haar
-    desc_haar[-1, -1] = 1.0                                             # the box-filter sum, passed through
+    desc_haar = np.zeros((n_look + sum_coef.size, plan.desc_haar.shape[1] + 1))
+    desc_haar[:n_look, :-1] = plan.desc_haar
+    desc_haar[n_look:, -1] = sum_coef                                   # the box-filter sum (its sign: the blob's)
     code = m - 1 - np.arange(n_bands * m) % m
-    out = _BandPlan(None if contiguous else rows, starts[0], acc, lin, np.tile(resp_w, (n_bands, 1)),
-                    np.ascontiguousarray(desc_flat.T), np.ascontiguousarray(desc_haar.T),
-                    np.ascontiguousarray(desc_abs.T), np.tile(x, n_bands),
+    out = _BandPlan(None if contiguous else rows, starts[0], acc, lin, ext, resp_flat,
+                    np.tile(resp_w, (n_bands, 1)), np.ascontiguousarray(desc_flat.T),
+                    np.ascontiguousarray(desc_haar.T), np.ascontiguousarray(desc_abs.T), np.tile(x, n_bands),
                     code.astype(np.int64), (np.arange(n_bands) * m + m - 1)[:, None], (1 << m.bit_length()) - 1,
                     m, n)
-    for a in (rows, out.lin, out.resp_w, out.desc_t, out.desc_haar, out.desc_abs, out.x, out.code, out.null):
-        a.setflags(write=False)
+    for a in (rows, out.lin, out.ext, out.resp_flat, out.resp_w, out.desc_t, out.desc_haar, out.desc_abs, out.x,
+              out.code, out.null):
+        if a is not None:
+            a.setflags(write=False)
     return out
 
 
@@ -258,14 +291,20 @@ def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonP
     n_bands, band = params.bands, params.band_height
     px = image[bp.r0:bp.r0 + n_bands * band] if bp.rows is None else image[bp.rows]
     if params.sample_mode is SampleMode.BOX:     # (B, n) box sums
-        sig = px[:, :bp.n * params.step].reshape(n_bands, band, bp.n, params.step).sum(axis=(1, 3), dtype=bp.acc)
-    else:                                        # (B, W) column sums, every step-th the signal
-        sig = np.add.reduce(px.reshape(n_bands, band, width), axis=1, dtype=bp.acc)[:, ::params.step]
-    out = np.matmul(sig.astype(bp.lin.dtype), bp.lin)                   # (B, M + seg + 1), integers
+        sums = px[:, :bp.n * params.step].reshape(n_bands, band, bp.n, params.step).sum(axis=(1, 3), dtype=bp.acc)
+    else:                                        # (B, W) column sums, every step-th a signal sample
+        sums = np.add.reduce(px.reshape(n_bands, band, width), axis=1, dtype=bp.acc)
+    if bp.lin is not None:
+        sig = sums if params.sample_mode is SampleMode.BOX else sums[:, ::params.step]
+        out = np.matmul(sig.astype(bp.lin.dtype), bp.lin)               # (B, M + seg + 1), integers
+        box_sums = out[:, :bp.m]
+    else:
+        out = cv2.integral(sums.ravel().take(bp.ext).reshape(1, -1), sdepth=cv2.CV_64F)[1]
+        box_sums = np.matmul(RESP_COEF, out.take(bp.resp_flat)).reshape(n_bands, bp.m)
     # |response| of every candidate, float64 as surf1d, between two zeros (the flat vector's outer neighbours).
     a = np.zeros(params.bands * bp.m + 2)
     c = a[1:-1]
-    np.abs(np.multiply(out[:, :bp.m], bp.resp_w).ravel(), out=c)
+    np.abs(np.multiply(box_sums, bp.resp_w).ravel(), out=c)
     # Extrema in space (as surf1d): above the threshold, above the left neighbour, not below the right one.
     ext = c > np.maximum(a[:-2], params.threshold)
     ext &= c >= a[2:]
