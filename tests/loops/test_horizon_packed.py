@@ -20,13 +20,15 @@ def same_features(packed, reference: list[HorizonFeatures]) -> None:
     for k, f in enumerate(reference):
         v = packed.valid[k]
         assert v.sum() == len(f)
-        # Order by column, then by the first descriptor number (two levels can share a column).
-        order = np.lexsort((packed.keys[k][v][:, 0], packed.x[k][v]))
-        ref_order = np.lexsort((f.descriptor[:, 0], f.x))
-        np.testing.assert_array_equal(packed.x[k][v][order], f.x[ref_order])
-        keys = packed.keys[k][v][order]
-        np.testing.assert_allclose(keys[:, :-1], f.descriptor[ref_order], atol=1e-6)
-        np.testing.assert_array_equal(np.sign(keys[:, -1]), f.sign[ref_order])
+        # Each reference feature has its own packed one: same column, same sign, descriptor within float32
+        # rounding (two levels can share a column, so pair them by descriptor rather than by a sort order).
+        x, keys = packed.x[k][v], packed.keys[k][v]
+        free = np.ones(len(f), bool)
+        for i in range(len(f)):
+            cand = np.flatnonzero(free & (x == f.x[i]) & (np.sign(keys[:, -1]) == f.sign[i])
+                                  & (np.abs(keys[:, :-1] - f.descriptor[i]).max(axis=1) <= 1e-6))
+            assert cand.size, f"band {k}: no packed feature like the reference one at column {f.x[i]}"
+            free[cand[0]] = False
         assert not packed.keys[k][~v].any()      # empty slots are all zero
 
 
@@ -52,6 +54,35 @@ def test_packed_extraction_gives_the_reference_features(row):
     for seed in range(3):
         img = scene(seed)
         same_features(extract_packed(img, row, FAST), extract_bands(img, row, FAST))
+
+
+@pytest.mark.parametrize("over", [{}, {"step": 1}, {"bands": 1, "threshold": 0.0}, {"max_features": 400},
+                                  {"sample_mode": "box", "step": 4, "band_height": 30}])
+def test_lone_preset_and_other_settings_give_the_reference_features(over):
+    # lone: three 16-row bands every 4 columns; max_features 400 exceeds the candidates of a 160-px frame (the
+    # slots past them stay empty); box sampling over 4 x 30 pixels no longer fits the 16-bit accumulator.
+    p = HorizonParams.preset("lone").replace(**over)
+    for seed in range(3):
+        img = scene(seed)
+        same_features(extract_packed(img, 60.0, p), extract_bands(img, 60.0, p))
+
+
+@pytest.mark.parametrize("preset", ["fast", "lone"])
+def test_wide_frames_with_empty_slots_give_the_reference_features(preset):
+    # 1200 px: the gather path (not the dense product of short signals); 300 slots per band, more than the scene's
+    # features, so empty slots must come out all zero there too.
+    p = HorizonParams.preset(preset).replace(max_features=300)
+    for seed in range(2):
+        img = scene(seed, width=1200)
+        packed = extract_packed(img, 60.0, p)
+        assert (~packed.valid).any()
+        same_features(packed, extract_bands(img, 60.0, p))
+
+
+def test_a_float_image_gives_the_reference_features():
+    img = scene(6).astype(np.float32) / 255.0 * 100.0     # not integers: the float64 path
+    p = FAST.replace(threshold=0.1)
+    same_features(extract_packed(img, 60.0, p), extract_bands(img, 60.0, p))
 
 
 def test_overlapping_bands_of_a_low_image_give_the_reference_features():
@@ -110,6 +141,14 @@ def test_real_frames_give_the_reference_features_and_scores(shared_data):
     got = match_packed(packed[0], stack_packed(packed[2:]), FAST)
     np.testing.assert_allclose(got.score, ref_nn, rtol=1e-5)
     np.testing.assert_allclose(got.score_ransac, ref_cons, rtol=1e-5)
+    lone = HorizonParams.preset("lone")
+    for img in imgs:
+        same_features(extract_packed(img, 60.0, lone), extract_bands(img, 60.0, lone))
+    lone_nn, lone_cons = reference_scores(imgs[2], imgs[:2] + imgs[3:], 60.0, lone)
+    sub = match_packed(extract_packed(imgs[2], 60.0, lone),
+                       stack_packed([extract_packed(i, 60.0, lone) for i in imgs[:2] + imgs[3:]]), lone, [2, 0])
+    np.testing.assert_allclose(sub.score, lone_nn[[2, 0]], rtol=1e-5)
+    np.testing.assert_allclose(sub.score_ransac, lone_cons[[2, 0]], rtol=1e-5)
     # Reference place 10 is query place 10 or 11 (the traverses are aligned), not query place 90.
     assert min(got.score_ransac[:2]) > got.score_ransac[2]
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import shlex
 import time
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from loops.horizon import HorizonParams, extract_features, match, nn_matches
 from loops.horizon.pairs_file import SCORE_COLUMNS, score_pairs_file
 from odometry.shared.atomic_io import atomic_path, atomic_write_text
 from vslam.app.horizon import horizon_params
+from vslam.bench.docs import publish
 from vslam.bench.horizon_bank import SNIPPETS, Bank, build_bank, load_crops
 from vslam.bench.horizon_fast import PairSet, compare
 from vslam.bench.horizon_real import build_real_bank, real_pairs_table
@@ -149,6 +151,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fast-preset", default="fast",
                         help="HorizonParams preset of the packed 1D SURF compared with ORB + RANSAC per image and "
                              "per pair (default: %(default)s)")
+    parser.add_argument("--lone-preset", default="lone",
+                        help="a second packed preset in the same comparison, the lightest for a lone pair; '' for none "
+                             "(default: %(default)s)")
     parser.add_argument("--threads", type=int, default=1,
                         help="OpenCV threads for SIFT; 1 compares single core with single core (default: 1)")
 
@@ -309,14 +314,18 @@ def _real(args: argparse.Namespace, data_dir: Path) -> tuple[str, dict]:
     print("real pairs: packed 1D SURF vs ORB + RANSAC, per image and per pair ...", flush=True)
     bank = build_real_bank(data_dir)
     fast_table, fast_res = compare(PairSet(bank.images, bank.rows, bank.pairs, bank.labels, bank.half),
-                                   HorizonParams.preset(args.fast_preset),
-                                   {"tuning": 0, "reporting": 1})
-    head = (f"Packed 1D SURF (preset {args.fast_preset}) against ORB + RANSAC on the same real pairs, thread CPU "
-            f"time, the methods taking turns every 16 images / test views (definitions in "
+                                   _packed_presets(args), {"tuning": 0, "reporting": 1})
+    head = (f"Packed 1D SURF (presets {' and '.join(_packed_presets(args))}) against ORB + RANSAC on the same real "
+            f"pairs, thread CPU time, the methods taking turns every 16 images / test views (definitions in "
             f"vslam/bench/horizon_fast.py and docs/benchmarks.md).")
     print(f"{head}\n\n{fast_table}", flush=True)
     res["packed_vs_orb"] = fast_res
     return f"{text}\n\n{head}\n\n{fast_table}", res
+
+
+def _packed_presets(args: argparse.Namespace) -> dict[str, HorizonParams]:
+    names = [args.fast_preset] + ([args.lone_preset] if args.lone_preset else [])
+    return {n: HorizonParams.preset(n) for n in dict.fromkeys(names)}
 
 
 def _crop_bank_fast(args: argparse.Namespace, bank: Bank) -> tuple[str, dict]:
@@ -326,8 +335,9 @@ def _crop_bank_fast(args: argparse.Namespace, bank: Bank) -> tuple[str, dict]:
     names = [str(i) for i in range(len(bank.views))]
     ps = PairSet(dict(zip(names, crops)), {n: float(v.row) for n, v in zip(names, bank.views)},
                  [(names[a], names[b]) for a, b in bank.pairs], bank.labels, np.zeros(len(bank.pairs), int))
-    table, res = compare(ps, HorizonParams.preset(args.fast_preset), {"crop bank (all; nothing tuned here)": None})
-    text = f"Packed 1D SURF (preset {args.fast_preset}) against ORB + RANSAC on the crop bank above.\n\n{table}"
+    table, res = compare(ps, _packed_presets(args), {"crop bank (all; nothing tuned here)": None})
+    text = (f"Packed 1D SURF (presets {' and '.join(_packed_presets(args))}) against ORB + RANSAC on the crop bank "
+            f"above.\n\n{table}")
     print(text, flush=True)
     return text, res
 
@@ -338,6 +348,7 @@ def run(args: argparse.Namespace) -> BenchResult:
     if args.real_only:
         text, res = _real(args, data_dir)
         write_json(args.out / "horizon_real.json", {"benchmark": "horizon-real", "real_pairs": res, "table": text})
+        publish_sections(args, {"horizon-real": text})
         return BenchResult(None)
     cv2.setNumThreads(max(1, args.threads))
     banks = _banks(args, data_dir)
@@ -388,7 +399,21 @@ def run(args: argparse.Namespace) -> BenchResult:
         "table": table, "sweep_table": sweep_table,
     })
     print(f"wrote {args.out / 'horizon.json'}, {args.out / 'roc.png'}, {args.out / 'bank_scores.csv'}")
-    return BenchResult(f"{table}\n\n{sweep_table}\n\n" + "\n\n".join(lines + [kitti_line, real_text, crop_fast_text]))
+    publish_sections(args, {"horizon-real": real_text, "horizon-packed-crop": crop_fast_text})
+    if args.no_sift:    # the crop bank's tables without their SIFT reference do not replace the documented ones
+        return BenchResult(None)
+    return BenchResult(f"{table}\n\n{sweep_table}\n\n" + "\n\n".join(lines + [kitti_line]))
+
+
+def publish_sections(args: argparse.Namespace, sections: dict[str, str]) -> None:
+    """The real-pairs and packed tables into their own sections of docs/benchmarks.md (horizon-real,
+    horizon-packed-crop), under the CLI's --docs / --no-docs / --docs-file; the crop bank's own tables go to the
+    `horizon` section through the registry as before."""
+    command = "vslam " + shlex.join(getattr(args, "command_line", None) or ["bench", "horizon"])
+    for name, text in sections.items():
+        note = publish(name, text, command, getattr(args, "docs", None), getattr(args, "docs_file", None))
+        if note:
+            print(note)
 
 
 def _argv_echo(args: argparse.Namespace) -> list[str]:
@@ -399,5 +424,5 @@ def _argv_echo(args: argparse.Namespace) -> list[str]:
     out += ["--no-sift"] if args.no_sift else []
     out += ["--quick"] if args.quick else []
     out += ["--real-only"] if args.real_only else []
-    out += [f"--fast-preset {args.fast_preset}"]
+    out += [f"--fast-preset {args.fast_preset}", f"--lone-preset {args.lone_preset or repr('')}"]
     return out

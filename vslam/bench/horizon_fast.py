@@ -1,10 +1,11 @@
-"""Packed 1D SURF (`loops.horizon.packed`, preset `fast`) against full-image ORB + RANSAC, accuracy and time, on
-the same frames in the same run.
+"""Packed 1D SURF (`loops.horizon.packed`, presets `fast` and `lone`) against full-image ORB + RANSAC, accuracy and
+time, on the same frames in the same run.
 
-How the time is compared (both methods, same images, same pairs, same process, one thread each: OpenCV
+How the time is compared (all methods, same images, same pairs, same process, one thread each: OpenCV
 single-threaded, BLAS single-threaded by the CLI; thread CPU time, so that time spent waiting for other
-processes on a shared machine does not count; the two methods take turns every 16 images / 16 test views, so that
-a change of load hits both, while each runs its own loop as it would in use):
+processes on a shared machine does not count; the methods take turns every 16 images / 16 test views, each block
+starting with the next method, so that a change of load hits all, while each runs its own loop as it would in
+use):
 
 - per image: one extraction call (a frame as it arrives), median over the images.
 - per pair, matching: median over the pairs. ORB matches one pair per call (its cost does not depend on the
@@ -20,6 +21,7 @@ a change of load hits both, while each runs its own loop as it would in use):
 """
 from __future__ import annotations
 
+import functools
 import time
 from collections import defaultdict
 from dataclasses import dataclass
@@ -34,6 +36,8 @@ from vslam.bench.horizon_real import OrbRansac
 from vslam.evaluation.tables import format_table
 
 ORB = "ORB(1000) + RANSAC, native size"
+EXTRACT_CALLS = 33   # array operations in one extract_packed (loops/horizon/packed.py, COLUMN sampling, step > 1)
+MATCH_CALLS = 60     # array operations in one match_packed call with `which` (whatever the number of views)
 BLOCK = 16   # images or test views per block: the methods take turns block by block
 
 
@@ -54,60 +58,89 @@ class _Measured:
     scores: dict[str, np.ndarray]                  # method -> (P,) score
     ext_us: dict[str, dict[str, float]]            # method -> image -> extraction us
     match_us: dict[str, np.ndarray]                # method -> (P,) matching us charged to each pair
-    all_us: dict[str, float]                       # test image -> packed us / pair against every stored view
-    stack_us: float                                # packed: building the stored set, us per stored view
+    all_us: dict[str, dict[str, float]]            # packed method -> test image -> us / pair against every view
+    stack_us: dict[str, float]                     # packed method -> building the stored set, us per stored view
+    call_us: float                                 # one trivial array call (the per-call floor), median
 
 
-def fast_name(params: HorizonParams) -> str:
-    return (f"1D SURF packed, preset fast ({params.bands} bands, {params.max_features} features / band, "
-            f"shift consensus)")
+def fast_name(params: HorizonParams, preset: str = "fast") -> str:
+    return (f"1D SURF packed, preset {preset} ({params.bands} bands, {params.max_features} features / band, "
+            f"step {params.step}, shift consensus)")
+
+
+def _trivial_calls(clock, n: int = 8, per: int = 16) -> list[float]:
+    """Thread time of a trivial array call (np.add of two 16-element arrays), us each, from n runs of `per` calls
+    (so the clock's own cost is spread): the per-call cost that bounds a method made of a few dozen array
+    operations on small arrays."""
+    a, b = np.ones(16), np.ones(16)
+    out = []
+    for _ in range(n):
+        t0 = clock()
+        for _ in range(per):
+            np.add(a, b)
+        out.append((clock() - t0) / 1e3 / per)
+    return out
+
+
+def _turns(methods: list, i: int) -> list:
+    """The methods in block i's order: each block starts with the next one."""
+    k = i % len(methods)
+    return methods[k:] + methods[:k]
 
 
 def _blocks(items: list, size: int = BLOCK) -> list[list]:
     return [items[i:i + size] for i in range(0, len(items), size)]
 
 
-def _measure(ps: PairSet, params: HorizonParams) -> _Measured:
+def _measure(ps: PairSet, packed: dict[str, HorizonParams]) -> _Measured:
+    """Every packed method (name -> params) and ORB on the same images and pairs, taking turns block by block."""
     cv2.setNumThreads(1)
     clock = time.thread_time_ns
     orb = OrbRansac()
-    fast = fast_name(params)
-    feats: dict[str, dict] = {ORB: {}, fast: {}}
-    ext: dict[str, dict[str, float]] = {ORB: {}, fast: {}}
-    extractors = {ORB: lambda im, row: orb.extract(im), fast: lambda im, row: extract_packed(im, row, params)}
+    methods = [*packed, ORB]
+    feats: dict[str, dict] = {m: {} for m in methods}
+    ext: dict[str, dict[str, float]] = {m: {} for m in methods}
+    extractors = {ORB: lambda im, row: orb.extract(im)}
+    for name, params in packed.items():
+        extractors[name] = functools.partial(lambda im, row, p: extract_packed(im, row, p), p=params)
+    calls: list[float] = []
     for i, block in enumerate(_blocks(list(ps.images))):
-        for method in ((ORB, fast) if i % 2 else (fast, ORB)):
+        calls += _trivial_calls(clock)
+        for method in _turns(methods, i):
             for name in block:
                 t0 = clock()
                 feats[method][name] = extractors[method](ps.images[name], ps.rows[name])
                 ext[method][name] = (clock() - t0) / 1e3
     stored_names = sorted({a for a, _ in ps.pairs})
     col = {n: i for i, n in enumerate(stored_names)}
-    t0 = clock()
-    db = stack_packed([feats[fast][n] for n in stored_names])
-    stack_us = (clock() - t0) / 1e3 / len(stored_names)
+    dbs, stack_us = {}, {}
+    for name in packed:
+        t0 = clock()
+        dbs[name] = stack_packed([feats[name][n] for n in stored_names])
+        stack_us[name] = (clock() - t0) / 1e3 / len(stored_names)
     groups: dict[str, list[int]] = defaultdict(list)
     for p, (_, b) in enumerate(ps.pairs):
         groups[b].append(p)
     n = len(ps.pairs)
-    scores = {ORB: np.zeros(n), fast: np.zeros(n)}
-    match_us = {ORB: np.zeros(n), fast: np.zeros(n)}
-    all_us: dict[str, float] = {}
+    scores = {m: np.zeros(n) for m in methods}
+    match_us = {m: np.zeros(n) for m in methods}
+    all_us: dict[str, dict[str, float]] = {m: {} for m in packed}
 
-    def packed(block: list[str]) -> None:
+    def packed_block(method: str, block: list[str]) -> None:
+        params, db = packed[method], dbs[method]
         for b in block:
             idx = groups[b]
             which = np.array([col[ps.pairs[p][0]] for p in idx])
             t0 = clock()
-            r = match_packed(feats[fast][b], db, params, which)
+            r = match_packed(feats[method][b], db, params, which)
             t = (clock() - t0) / 1e3
-            scores[fast][idx] = r.score_ransac
-            match_us[fast][idx] = t / len(idx)
+            scores[method][idx] = r.score_ransac
+            match_us[method][idx] = t / len(idx)
             t0 = clock()
-            match_packed(feats[fast][b], db, params)
-            all_us[b] = (clock() - t0) / 1e3 / len(stored_names)
+            match_packed(feats[method][b], db, params)
+            all_us[method][b] = (clock() - t0) / 1e3 / len(stored_names)
 
-    def orb_pairs(block: list[str]) -> None:
+    def orb_block(block: list[str]) -> None:
         for b in block:
             for p in groups[b]:
                 t0 = clock()
@@ -115,9 +148,9 @@ def _measure(ps: PairSet, params: HorizonParams) -> _Measured:
                 match_us[ORB][p] = (clock() - t0) / 1e3
 
     for i, block in enumerate(_blocks(list(groups))):
-        for run in ((orb_pairs, packed) if i % 2 else (packed, orb_pairs)):
-            run(block)
-    return _Measured(scores, ext, match_us, all_us, stack_us)
+        for method in _turns(methods, i):
+            orb_block(block) if method == ORB else packed_block(method, block)
+    return _Measured(scores, ext, match_us, all_us, stack_us, float(np.median(calls)))
 
 
 def _half_figures(ps: PairSet, m: _Measured, method: str, sel: np.ndarray) -> dict:
@@ -125,8 +158,8 @@ def _half_figures(ps: PairSet, m: _Measured, method: str, sel: np.ndarray) -> di
     stored, tests = sorted({a for a, _ in pairs}), sorted({b for _, b in pairs})
     ext = float(np.median([m.ext_us[method][k] for k in sorted(set(stored) | set(tests))]))
     match = float(np.median(m.match_us[method][sel]))
-    every = match if method == ORB else float(np.median([m.all_us[b] for b in tests]))
-    stack = 0.0 if method == ORB else m.stack_us
+    every = match if method == ORB else float(np.median([m.all_us[method][b] for b in tests]))
+    stack = 0.0 if method == ORB else m.stack_us[method]
     y = ps.labels[sel]
     return {"auc": auc(m.scores[method][sel], y), "pairs": int(sel.sum()), "test_views": len(tests),
             "stored_views": len(stored), "extraction_us": ext, "matching_us": match, "matching_every_us": every,
@@ -135,25 +168,34 @@ def _half_figures(ps: PairSet, m: _Measured, method: str, sel: np.ndarray) -> di
             "every_pair_us": every + (ext * (len(tests) + len(stored)) + stack * len(stored)) / (len(tests) * len(stored))}
 
 
-def compare(ps: PairSet, params: HorizonParams, halves: dict[str, int | None]) -> tuple[str, dict]:
-    """Table of AUC and per-image / per-pair times of both methods on each half (name -> half id, None = all)."""
-    m = _measure(ps, params)
-    fast = fast_name(params)
+def compare(ps: PairSet, packed: dict[str, HorizonParams], halves: dict[str, int | None]) -> tuple[str, dict]:
+    """Table of AUC and per-image / per-pair times of every packed preset (preset name -> params) and ORB on each
+    half (name -> half id, None = all), and each preset's time ratios to ORB's."""
+    named = {fast_name(p, preset): p for preset, p in packed.items()}
+    m = _measure(ps, named)
     res: dict[str, dict] = {}
     rows, ratio_rows = [], []
     cols = ("extraction_us", "matching_us", "matching_every_us", "strict_us", "every_pair_us")
     for half_name, h in halves.items():
         sel = np.ones(len(ps.pairs), bool) if h is None else ps.half == h
-        res[half_name] = {meth: _half_figures(ps, m, meth, sel) for meth in (fast, ORB)}
-        o, f = res[half_name][ORB], res[half_name][fast]
-        for meth in (fast, ORB):
+        res[half_name] = {meth: _half_figures(ps, m, meth, sel) for meth in (*named, ORB)}
+        o = res[half_name][ORB]
+        for meth in (*named, ORB):
             r = res[half_name][meth]
             rows.append([half_name, meth, r["pairs"], r["auc"], *(r[c] for c in cols)])
-        ratio_rows.append([half_name, f["auc"] - o["auc"], *(o[c] / f[c] for c in cols)])
-        res[half_name]["orb_over_packed"] = {c: o[c] / f[c] for c in cols}
+        res[half_name]["orb_over_packed"] = {}
+        for preset, meth in zip(packed, named):
+            f = res[half_name][meth]
+            ratio_rows.append([half_name, preset, f["auc"] - o["auc"], *(o[c] / f[c] for c in cols)])
+            res[half_name]["orb_over_packed"][preset] = {c: o[c] / f[c] for c in cols}
     names = ["extraction / image", "matching / pair (its candidates)", "matching / pair (against every stored view)",
              "per pair, strict (2 extractions + matching)", "per pair, every test x every stored view"]
     table = format_table(["half", "method", "pairs", "AUC", *(f"{n}, us" for n in names)], rows, floatfmt=".3g")
-    ratios = format_table(["half", "AUC, packed - ORB", *(f"ORB / packed, {n}" for n in names)], ratio_rows,
-                          floatfmt=".3g")
-    return f"{table}\n\n{ratios}", res
+    ratios = format_table(["half", "preset", "AUC, packed - ORB", *(f"ORB / packed, {n}" for n in names)],
+                          ratio_rows, floatfmt=".3g")
+    res["trivial_call_us"] = m.call_us
+    floor = (f"One trivial array call (np.add of two 16-element arrays, timed between the blocks of this run): "
+             f"{m.call_us:.2g} us median. A packed extraction is {EXTRACT_CALLS} array operations, a packed "
+             f"matching call {MATCH_CALLS} (shared by its candidates): at that cost alone a strict pair with about 9 "
+             f"candidates per test view is >= {m.call_us * (2 * EXTRACT_CALLS + MATCH_CALLS / 9):.2g} us.")
+    return f"{table}\n\n{ratios}\n\n{floor}", res
