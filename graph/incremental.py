@@ -563,7 +563,7 @@ class IncrementalPoseGraph:
                             f"{self._factorization}; report {report_seconds:.3f} s"] + self.notes)
 
 
-def _replay(data: PoseGraphData, params: GraphParams) -> tuple[IncrementalPoseGraph, np.ndarray]:
+def replay(data: PoseGraphData, params: GraphParams) -> tuple[IncrementalPoseGraph, np.ndarray]:
     """Feed a whole graph to an IncrementalPoseGraph in node order; returns it and the edge arrival order.
 
     Node k arrives with the edges linking it to nodes 0..k (in data order); its guess is composed from odometry
@@ -606,7 +606,7 @@ def _loop_order(data: PoseGraphData, order: np.ndarray) -> np.ndarray:
 def gate_pass(data: PoseGraphData, params: GraphParams) -> tuple[np.ndarray, np.ndarray]:
     """Replay the graph through the gated iSAM2 pass: (estimate (N, w) in node order, admitted flag per loop in
     data order)."""
-    inc, order = _replay(data, params.replace(robust={"gate_loops": True},
+    inc, order = replay(data, params.replace(robust={"gate_loops": True},
                                                 incremental={"batch_nodes": params.incremental.gate_batch_nodes}))
     _, est = inc.estimate()
     admitted = np.zeros(data.num_loops, bool)
@@ -618,7 +618,7 @@ def full_pass(data: PoseGraphData, params: GraphParams) -> GraphResult:
     """The whole graph through iSAM2 as an online system would see it; loops classified at the end (robust modes).
     Loop results are reported in data order."""
     t0 = time.perf_counter()
-    inc, order = _replay(data, params)
+    inc, order = replay(data, params)
     res = inc.result(classify=params.robust.method != RobustMode.NONE)
     res.seconds = time.perf_counter() - t0
     perm = np.empty(data.num_loops, np.int64)
