@@ -200,6 +200,14 @@ class IncrementalStrategy(GraphStrategy):
     def __init__(self, dim: int, params: GraphParams):
         super().__init__(dim, params)
         self._inc = IncrementalPoseGraph(dim, self.online_params(params))
+        self._decision: GraphResult | None = None     # the final decision, handed to iSAM2 if the graph grows
+
+    def _resume(self) -> None:
+        """The graph grows after a final decision: iSAM2 continues from it (the decided loops, at the decided
+        poses), not from what its gate had admitted. Lazy, so a run that ends at `result()` pays nothing."""
+        if self._decision is not None:
+            self._inc.adopt(self._decision.loop_inlier, self._decision.poses)
+            self._decision = None
 
     @staticmethod
     def online_params(params: GraphParams) -> GraphParams:
@@ -237,14 +245,17 @@ class IncrementalStrategy(GraphStrategy):
         return res
 
     def add_node(self, node_id: int, guess: np.ndarray | None) -> None:
+        self._resume()
         self._inc.add_node(node_id, guess)
 
     def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None,
                      information: np.ndarray | None) -> None:
+        self._resume()
         self._inc.add_odometry(i, j, delta, cov, information)
 
     def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None, probability: float | None,
                  information: np.ndarray | None) -> int:
+        self._resume()
         return self._inc.add_loop(i, j, delta, cov, probability=probability, information=information)
 
     def set_guesses(self, poses: np.ndarray) -> None:
@@ -262,6 +273,7 @@ class IncrementalStrategy(GraphStrategy):
         # loop as the batch strategy would on the same graph
         self._inc.update(final=True)
         res = optimize(self._inc.to_data(), self.final_params(self.params, warm_start))
+        self._decision = res
         return self._decided(res, self._inc, self._inc.seconds)
 
     def to_data(self) -> PoseGraphData:
