@@ -645,7 +645,7 @@ def gate_pass(data: PoseGraphData, params: GraphParams) -> tuple[np.ndarray, np.
     """Replay the graph through the gated iSAM2 pass: (estimate (N, w) in node order, admitted flag per loop in
     data order)."""
     inc, order = replay(data, params.replace(robust={"gate_loops": True},
-                                                incremental={"batch_nodes": params.incremental.gate_batch_nodes}))
+                                               incremental={"batch_nodes": params.incremental.gate_batch_nodes}))
     _, est = inc.estimate()
     admitted = np.zeros(data.num_loops, bool)
     admitted[_loop_order(data, order)] = inc.loop_inliers()
