@@ -434,6 +434,44 @@ class IncrementalPoseGraph:
         self._estimate = None
         self.notes.append(f"iSAM2 rebuilt with {factorization} factorization after an indeterminate-system error")
 
+    def adopt(self, inlier: np.ndarray, poses: np.ndarray) -> None:
+        """Take a decision made elsewhere (the batch rejector): iSAM2 is rebuilt holding the trusted factors and
+        exactly the `inlier` loops (plain Gaussian factors: decided, no kernel), linearised at `poses` (one row per
+        node handed over, in order). Later arrivals continue from there: gated against the decided map, drift
+        restarting at the decided loops.
+
+        A rebuild rather than removals and insertions: the decision may move the map by metres (the loops the gate
+        deferred under drift), more than iSAM2's relinearisation recovers in a few steps."""
+        self.update(final=True)
+        inlier = np.asarray(inlier, bool)
+        n = sum(self._in_isam)
+        if len(inlier) != self.num_loops or len(poses) < n:
+            raise ValueError(f"adopt: {len(inlier)} labels for {self.num_loops} loops, {len(poses)} poses for {n}")
+        t0 = time.perf_counter()
+        kept = np.flatnonzero(inlier).tolist()
+        graph = graph_of(self._trusted + [self._loop_factor[s] for s in kept])
+        values = values_from_array(self.dim, np.asarray(poses, float)[:n])
+        self._isam = gtsam.ISAM2(_isam_params(self.params, self._factorization))
+        try:
+            res = self._isam.update(graph, values)
+        except RuntimeError as exc:
+            if "ndeterminate" not in str(exc) or self._factorization == "qr":
+                raise
+            self._factorization = "qr"         # as in update(): Cholesky gives up on near-singular information
+            self._isam = gtsam.ISAM2(_isam_params(self.params, self._factorization))
+            res = self._isam.update(graph, values)
+        self._loop_slot = [-1] * self.num_loops
+        for s, fi in zip(kept, list(res.getNewFactorsIndices())[len(self._trusted):]):
+            self._loop_slot[s] = int(fi)
+        self._loop_robust = [False] * self.num_loops
+        self._loop_state = [ADMITTED if ok else REJECTED for ok in inlier.tolist()]
+        for s in kept:
+            self._union(*self._edges[self._loop_edge[s]][:2])
+            self._tie(s)
+        self._estimate = None
+        self.updates += 1
+        self.seconds += time.perf_counter() - t0
+
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
         """(node ids, poses) of everything handed to iSAM2 so far; computed once per update, then cached."""
         n = sum(self._in_isam)
@@ -563,7 +601,7 @@ class IncrementalPoseGraph:
                             f"{self._factorization}; report {report_seconds:.3f} s"] + self.notes)
 
 
-def _replay(data: PoseGraphData, params: GraphParams) -> tuple[IncrementalPoseGraph, np.ndarray]:
+def replay(data: PoseGraphData, params: GraphParams) -> tuple[IncrementalPoseGraph, np.ndarray]:
     """Feed a whole graph to an IncrementalPoseGraph in node order; returns it and the edge arrival order.
 
     Node k arrives with the edges linking it to nodes 0..k (in data order); its guess is composed from odometry
@@ -606,8 +644,8 @@ def _loop_order(data: PoseGraphData, order: np.ndarray) -> np.ndarray:
 def gate_pass(data: PoseGraphData, params: GraphParams) -> tuple[np.ndarray, np.ndarray]:
     """Replay the graph through the gated iSAM2 pass: (estimate (N, w) in node order, admitted flag per loop in
     data order)."""
-    inc, order = _replay(data, params.replace(robust={"gate_loops": True},
-                                                incremental={"batch_nodes": params.incremental.gate_batch_nodes}))
+    inc, order = replay(data, params.replace(robust={"gate_loops": True},
+                                               incremental={"batch_nodes": params.incremental.gate_batch_nodes}))
     _, est = inc.estimate()
     admitted = np.zeros(data.num_loops, bool)
     admitted[_loop_order(data, order)] = inc.loop_inliers()
@@ -618,7 +656,7 @@ def full_pass(data: PoseGraphData, params: GraphParams) -> GraphResult:
     """The whole graph through iSAM2 as an online system would see it; loops classified at the end (robust modes).
     Loop results are reported in data order."""
     t0 = time.perf_counter()
-    inc, order = _replay(data, params)
+    inc, order = replay(data, params)
     res = inc.result(classify=params.robust.method != RobustMode.NONE)
     res.seconds = time.perf_counter() - t0
     perm = np.empty(data.num_loops, np.int64)

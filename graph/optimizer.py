@@ -9,13 +9,14 @@ graph.incremental) and classifies them at the end.
 """
 from __future__ import annotations
 
+import time
 from abc import ABC, abstractmethod
 
 import numpy as np
 
 from graph.components import anchor_components
 from graph.errors import GraphError
-from graph.incremental import IncrementalPoseGraph, full_pass
+from graph.incremental import IncrementalPoseGraph, full_pass, replay
 from graph.model import PoseGraphData
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.pose_graph import PoseGraph
@@ -185,35 +186,76 @@ class BatchStrategy(GraphStrategy):
 
 
 class IncrementalStrategy(GraphStrategy):
-    """iSAM2: nodes and factors are inserted as they arrive (loops gated on arrival and behind a kernel); the final
-    solve classifies every loop. With robust mode `consensus` the online pass uses GNC to classify, and the final
-    labels come from the batch consensus solve started at the iSAM2 estimate."""
+    """iSAM2: nodes and factors are inserted as they arrive (loops gated on arrival and behind a kernel), so the
+    online estimate is cheap and protected from false loops; the final solve classifies every loop.
+
+    With robust method `consensus` (the default) the iSAM2 pass protects the online estimate with its gate and GNC,
+    and the final labels and poses are the batch `LoopRejector`'s on everything added, with the batch parameters:
+    the same decision as the batch strategy on the same graph (the online gate tests loops against the drifted
+    estimate at their arrival and rejects true loops under large drift: ring, 0 of 26 kept). Other robust methods
+    keep the iSAM2 pass's own classification (graph.incremental.classify_loops)."""
 
     online = True
 
     def __init__(self, dim: int, params: GraphParams):
         super().__init__(dim, params)
         self._inc = IncrementalPoseGraph(dim, self.online_params(params))
+        self._decision: GraphResult | None = None     # the final decision, handed to iSAM2 if the graph grows
+
+    def _resume(self) -> None:
+        """The graph grows after a final decision: iSAM2 continues from it (the decided loops, at the decided
+        poses), not from what its gate had admitted. Lazy, so a run that ends at `result()` pays nothing."""
+        if self._decision is not None:
+            self._inc.adopt(self._decision.loop_inlier, self._decision.poses)
+            self._decision = None
 
     @staticmethod
     def online_params(params: GraphParams) -> GraphParams:
         """The iSAM2 pass classifies with its own GNC where the batch method is consensus."""
         return params.replace(robust=RobustMode.GNC) if params.robust.method == RobustMode.CONSENSUS else params
 
+    @staticmethod
+    def final_params(params: GraphParams, warm_start: bool = False) -> GraphParams:
+        """The batch solve that decides the loops at the end: the batch strategy's own parameters (warm_start:
+        started at the iSAM2 estimate instead of LAGO / chordal)."""
+        solver = {"method": Solver.LM, **({"init": InitMethod.GIVEN} if warm_start else {})}
+        return params.replace(solver=solver)
+
     @classmethod
     def solve(cls, data: PoseGraphData, params: GraphParams) -> GraphResult:
-        """The whole graph replayed through iSAM2 as an online system would see it; loops classified at the end."""
-        return full_pass(data, cls.online_params(params))
+        """The whole graph replayed through iSAM2 in node order, as an online system would see it; then the loops
+        are classified as `final` does (consensus: the batch rejector on the file's graph, loops in data order)."""
+        if params.robust.method != RobustMode.CONSENSUS:
+            return full_pass(data, cls.online_params(params))
+        t0 = time.perf_counter()
+        inc, _ = replay(data, cls.online_params(params))
+        pass_seconds = time.perf_counter() - t0
+        # `optimize` has anchored the components already: the batch strategy's solve, not `optimize` again
+        return cls._decided(BatchStrategy.solve(data, cls.final_params(params)), inc, pass_seconds)
+
+    @staticmethod
+    def _decided(res: GraphResult, inc: IncrementalPoseGraph, pass_seconds: float) -> GraphResult:
+        """The batch decision `res`, reported as the iSAM2 strategy's result (time and notes of the pass)."""
+        admitted = inc.loop_inliers()
+        res.seconds += pass_seconds
+        res.solver = Solver.ISAM2.value            # the strategy that produced the online estimates
+        res.notes.insert(0, f"iSAM2 pass {pass_seconds:.3f} s ({inc.updates} updates; the arrival gate admitted "
+                            f"{int(admitted.sum())} of {len(admitted)} loops online), then the batch consensus "
+                            f"solve decides every loop")
+        return res
 
     def add_node(self, node_id: int, guess: np.ndarray | None) -> None:
+        self._resume()
         self._inc.add_node(node_id, guess)
 
     def add_odometry(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None,
                      information: np.ndarray | None) -> None:
+        self._resume()
         self._inc.add_odometry(i, j, delta, cov, information)
 
     def add_loop(self, i: int, j: int, delta: np.ndarray, cov: np.ndarray | None, probability: float | None,
                  information: np.ndarray | None) -> int:
+        self._resume()
         return self._inc.add_loop(i, j, delta, cov, probability=probability, information=information)
 
     def set_guesses(self, poses: np.ndarray) -> None:
@@ -227,16 +269,12 @@ class IncrementalStrategy(GraphStrategy):
     def final(self, warm_start: bool) -> GraphResult:
         if self.params.robust.method != RobustMode.CONSENSUS:
             return self._inc.result(classify=True)
-        # the final labels come from the batch consensus solve started at the iSAM2 estimate: the online gate
-        # tests loops against the drifted estimate at their arrival and rejects true loops under large drift
-        online = self._inc.result(classify=False)
-        data = self._inc.to_data()
-        data.poses = online.poses
-        res = optimize(data, self.params.replace(solver={"method": Solver.LM, "init": InitMethod.GIVEN}))
-        res.seconds += online.seconds
-        res.solver = Solver.ISAM2.value            # the strategy that produced the online estimates
-        res.notes.insert(0, f"iSAM2 pass {online.seconds:.3f} s, then the batch consensus solve from it")
-        return res
+        # flush what is pending into the online estimate (the start of a warm-started solve), then decide every
+        # loop as the batch strategy would on the same graph
+        self._inc.update(final=True)
+        res = optimize(self._inc.to_data(), self.final_params(self.params, warm_start))
+        self._decision = res
+        return self._decided(res, self._inc, self._inc.seconds)
 
     def to_data(self) -> PoseGraphData:
         return self._inc.to_data()

@@ -222,7 +222,9 @@ class IncrementalParams(Config):
                                doc="odometry steps buffered per iSAM2 update in a full pass")
     loop_kernel: RobustMode = RobustMode.CAUCHY   # online protection before the loops are classified
     final_steps: int = setting(2, range="[0, inf)", unit="updates",
-                               doc="extra empty updates at the end of a pass (more relinearisation)")
+                               doc="extra empty updates at the end of a pass (more relinearisation) when the "
+                                   "pass reports its own estimate (robust methods other than consensus, whose "
+                                   "final poses come from the batch decision)")
     gate_batch_nodes: int = setting(50, range="[1, inf)")   # nodes per iSAM2 update in the batch solver's gate pass
     #                                      (each update costs a relinearisation check and one estimate; the drift in
     #                                      between is modelled)
