@@ -24,7 +24,9 @@ from odometry.shared.pose_covariance import compose_with_covariance
 from odometry.shared.poses import between, compose
 from odometry.vo import VisualOdometry, VOEstimate, VOStatus
 from vslam.errors import VslamError
+from vslam.pipeline.anchored_motion import Anchor, AnchoredMotion
 from vslam.pipeline.backend import backend_graph, floored
+from vslam.pipeline.cluster_gate import ClusterGate
 from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import LoopPose, loop_pose
 from vslam.pipeline.motion_gate import ChainMotion, MotionGate, step_drift_covariance
@@ -126,8 +128,15 @@ class Pipeline:
         self.camera = camera
         self.vo = VisualOdometry(camera, cfg.vo)
         self.rng = np.random.default_rng(cfg.seed)
-        self.gate = MotionGate(self._loop_fit, self._keyframe_motion, cfg.loops.gate) if cfg.loops.gate.enabled \
-            else None
+        gp = cfg.loops.gate
+        self.relative_motion = AnchoredMotion(self._keyframe_motion, self._anchors, lambda: self.keyframes,
+                                              gp.anchor_search) if gp.anchor_loops else self._keyframe_motion
+        if not gp.enabled:
+            self.gate = None
+        elif gp.anchor_loops:
+            self.gate = ClusterGate(self._loop_fit, self.relative_motion, gp)
+        else:
+            self.gate = MotionGate(self._loop_fit, self.relative_motion, gp)
         self.loop_detector = build_loop_detector(cfg, camera, self.gate)
         self.graph = backend_graph(cfg.graph, cfg.incremental)
         self.timestamps: list[float] = []
@@ -290,6 +299,11 @@ class Pipeline:
         chain = ChainMotion(np.array([self.poses_vo[k] for k in kfs]), self.config.loops.gate.drift, keys=kfs,
                             step_cov=np.array(self.kf_step_cov[ia:ib + 1]), height=self.camera.camera_height)
         return chain(a, b)
+
+    def _anchors(self) -> list[Anchor]:
+        """Accepted loops with a floor fit that the back end has not rejected (the motion gate's anchors)."""
+        return [Anchor(r.match_frame, r.query_frame, r.delta, r.covariance) for r in self.graph_loops
+                if r.inlier is not False]
 
     def _maybe_optimize(self, force: bool = False) -> None:
         """Batch: re-solve after `optimize_every` new loops (and at the end). Incremental: an iSAM2 update whenever

@@ -1,0 +1,79 @@
+"""The pipeline's motion gate: anchored on the closed map, and asking a cluster before a first, unanchored loop on a
+floor with look-alikes.
+
+Once loops are accepted, a candidate is judged against the path through an accepted loop near both keyframes
+(`AnchoredMotion`), so a candidate a tile period away from where the closed map puts the camera fails. The first
+loop of a region has no such anchor: it is judged against the VO chain alone, whose uncertainty after a lap can
+exceed half a tile period, where an aliased candidate and the true one are equally plausible. On a floor known to
+repeat (the run has already seen a look-alike: a verified candidate with a clean rigid fit that the motion put
+elsewhere), such an unanchored loop is accepted only when a candidate of one of the previous `cluster_queries`
+query keyframes, itself consistent with the VO, agrees with it through a short path (its match -> VO -> this
+candidate, its query -> VO -> this query): two queries independently putting the camera at the same place. An
+isolated alias is then refused. A consistent shift of a whole cluster, when the VO error between the laps exceeds
+half a period, is undecidable from the VO and stays so; the anchored gate then at least keeps later loops
+consistent with the cluster, and the back end judges the cluster against the rest of the map.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from loops.recognition import Verification
+from odometry.shared.pose_covariance import compose_with_covariance
+from odometry.shared.poses import wrap_angle
+from vslam.pipeline.anchored_motion import Anchor, AnchoredMotion, chain_any, position_variance
+from vslam.pipeline.loop_pose import LoopPose
+from vslam.pipeline.motion_gate import GateResult, MotionGate, MotionGateParams
+
+
+class ClusterGate(MotionGate):
+    """`MotionGate` over an `AnchoredMotion`, with the cluster rule of the module docstring."""
+
+    def __init__(self, fit: Callable[[Verification], LoopPose | None], relative: AnchoredMotion,
+                 params: MotionGateParams | None = None):
+        super().__init__(fit, relative, params)
+        self.anchored = relative
+        self.lookalikes = 0                       # verified candidates with a rigid fit that the motion refused
+        self.tentative: list[Anchor] = []         # unanchored candidates consistent with the VO, newest last
+        self.queries: list[int] = []              # query keys seen, in order
+
+    def __call__(self, candidate: int, query: int, v: Verification) -> bool:
+        if not self.queries or self.queries[-1] != query:
+            self.queries.append(int(query))
+        res = self.check(candidate, query, v)
+        if not res.consistent:
+            if res.fit is not None:
+                self.lookalikes += 1
+            self.results[(int(candidate), int(query))] = res
+            return False
+        if self.params.cluster_queries > 0 and self.lookalikes > 0 \
+                and self.anchored.used.get((int(candidate), int(query))) is None:
+            me = Anchor(int(candidate), int(query), res.fit.delta, res.fit.covariance)
+            ok = self._supported(me)
+            self.tentative.append(me)
+            res = GateResult(ok, res.mahalanobis2, res.fit)
+        self.results[(int(candidate), int(query))] = res
+        return res.consistent
+
+    def _supported(self, me: Anchor) -> bool:
+        """Does a tentative loop of one of the previous `cluster_queries` query keyframes agree with `me` through a
+        path more certain than the VO chain?"""
+        recent = set(self.queries[-1 - self.params.cluster_queries:-1])
+        chain = self.anchored.chain
+        direct = position_variance(chain(me.match, me.query)[1]) if me.match <= me.query else np.inf
+        for t in reversed(self.tentative):
+            if t.query not in recent:
+                if t.query < min(recent, default=me.query):
+                    break
+                continue
+            rel, cov = compose_with_covariance(*chain_any(chain, me.match, t.match), t.delta, t.covariance)
+            rel, cov = compose_with_covariance(rel, cov, *chain_any(chain, t.query, me.query))
+            if position_variance(cov) >= direct:
+                continue
+            r = np.asarray(me.delta, float) - rel
+            r[2] = wrap_angle(r[2])
+            s = cov + me.covariance + np.eye(3) * 1e-12
+            if float(r @ np.linalg.solve(s, r)) <= self.params.chi2:
+                return True
+        return False
