@@ -17,12 +17,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-import numpy as np
-
 from loops.recognition import Verification
-from odometry.shared.pose_covariance import compose_with_covariance
-from odometry.shared.poses import wrap_angle
-from vslam.pipeline.anchored_motion import Anchor, AnchoredMotion, chain_any, position_variance
+from vslam.pipeline.anchored_motion import Anchor, AnchoredMotion, agree
 from vslam.pipeline.loop_pose import LoopPose
 from vslam.pipeline.motion_gate import GateResult, MotionGate, MotionGateParams
 
@@ -57,23 +53,8 @@ class ClusterGate(MotionGate):
         return res.consistent
 
     def _supported(self, me: Anchor) -> bool:
-        """Does a tentative loop of one of the previous `cluster_queries` query keyframes agree with `me` through a
-        path more certain than the VO chain?"""
+        """Does a tentative loop of one of the previous `cluster_queries` query keyframes agree with `me`?"""
         recent = set(self.queries[-1 - self.params.cluster_queries:-1])
-        chain = self.anchored.chain
-        direct = position_variance(chain(me.match, me.query)[1]) if me.match <= me.query else np.inf
-        for t in reversed(self.tentative):
-            if t.query not in recent:
-                if t.query < min(recent, default=me.query):
-                    break
-                continue
-            rel, cov = compose_with_covariance(*chain_any(chain, me.match, t.match), t.delta, t.covariance)
-            rel, cov = compose_with_covariance(rel, cov, *chain_any(chain, t.query, me.query))
-            if position_variance(cov) >= direct:
-                continue
-            r = np.asarray(me.delta, float) - rel
-            r[2] = wrap_angle(r[2])
-            s = cov + me.covariance + np.eye(3) * 1e-12
-            if float(r @ np.linalg.solve(s, r)) <= self.params.chi2:
-                return True
-        return False
+        a = self.anchored
+        return any(agree(a.chain, me, t, self.params.chi2, a.unscaled, a.scale_fraction) for t in self.tentative
+                   if t.query in recent)

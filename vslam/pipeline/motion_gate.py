@@ -72,6 +72,10 @@ class MotionGateParams(Config):
                                            "more certain than the VO chain), not the VO chain alone")
     anchor_search: int = setting(4, range="[1, inf)", unit="loops",
                                  doc="accepted loops, nearest along the keyframe chain first, tried as anchors")
+    anchor_support: int = setting(2, range="[1, inf)", unit="loops",
+                                  doc="an accepted loop anchors the gate once this many accepted loops (itself "
+                                      "included) agree with each other through short paths (1: at once); a lone "
+                                      "alias then cannot steer the gate")
     cluster_queries: int = setting(0, range="[0, inf)", unit="query keyframes",
                                    doc="pipeline, on a floor with look-alikes (a verified candidate the motion "
                                        "refused): a loop not anchored by an accepted one needs a candidate of one "

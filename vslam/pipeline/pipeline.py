@@ -24,12 +24,12 @@ from odometry.shared.pose_covariance import compose_with_covariance
 from odometry.shared.poses import between, compose
 from odometry.vo import VisualOdometry, VOEstimate, VOStatus
 from vslam.errors import VslamError
-from vslam.pipeline.anchored_motion import Anchor, AnchoredMotion
+from vslam.pipeline.anchored_motion import Anchor, AnchoredMotion, agree
 from vslam.pipeline.backend import backend_graph, floored
 from vslam.pipeline.cluster_gate import ClusterGate
 from vslam.pipeline.config import PipelineConfig
 from vslam.pipeline.loop_pose import LoopPose, loop_pose
-from vslam.pipeline.motion_gate import ChainMotion, MotionGate, step_drift_covariance
+from vslam.pipeline.motion_gate import ChainMotion, DriftModel, MotionGate, step_drift_covariance
 from vslam.pipeline.outputs import write_outputs
 from vslam.pipeline.prefetch import lazy_frames, prefetch
 from vslam.pipeline.recognizers import build_loop_detector
@@ -130,7 +130,8 @@ class Pipeline:
         self.rng = np.random.default_rng(cfg.seed)
         gp = cfg.loops.gate
         self.relative_motion = AnchoredMotion(self._keyframe_motion, self._anchors, lambda: self.keyframes,
-                                              gp.anchor_search) if gp.anchor_loops else self._keyframe_motion
+                                              gp.anchor_search, self._keyframe_motion_unscaled,
+                                              gp.drift.trans_fraction) if gp.anchor_loops else self._keyframe_motion
         if not gp.enabled:
             self.gate = None
         elif gp.anchor_loops:
@@ -148,6 +149,8 @@ class Pipeline:
         self.kf_step_cov: list[np.ndarray] = []  # VO covariance of the step from the previous keyframe
         self.loops: list[LoopRecord] = []
         self.graph_loops: list[LoopRecord] = []
+        self._anchor: dict[int, Anchor] = {}     # per graph loop index: the loop as a gate anchor
+        self._support: dict[int, int] = {}       # and how many accepted loops agree with it (itself included)
         self.descriptor_bytes: list[int] = []
         self.similarity: list[tuple] = []
         self.timings: dict[str, list[float]] = {k: [] for k in ("decode", "vo", "loops", "graph", "record", "frame")}
@@ -279,6 +282,7 @@ class Pipeline:
                     rec.loop_index = self.graph.add_loop(rec.match_frame, rec.query_frame, lp.delta,
                                                          floored(lp.covariance), rec.probability)
                     self.graph_loops.append(rec)
+                    self._add_anchor(rec)
                     self._new_loops += 1
             out.append(rec)
         self.loops.extend(out)
@@ -290,20 +294,36 @@ class Pipeline:
         return loop_pose(self.camera, v.inliers_query, v.inliers_candidate, lc.pose_threshold_px,
                          lc.min_pose_inliers, lc.pose_pixel_sigma, self.rng)
 
-    def _keyframe_motion(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+    def _keyframe_motion(self, a: int, b: int, drift: DriftModel | None = None) -> tuple[np.ndarray, np.ndarray]:
         """VO motion from keyframe `a` to keyframe `b` (frame ids) and its drift-aware covariance: the chain of
         keyframes in between (the motion gate's odometry)."""
         ia = int(np.searchsorted(self.keyframes, a))
         ib = int(np.searchsorted(self.keyframes, b))
         kfs = self.keyframes[ia:ib + 1]
-        chain = ChainMotion(np.array([self.poses_vo[k] for k in kfs]), self.config.loops.gate.drift, keys=kfs,
+        chain = ChainMotion(np.array([self.poses_vo[k] for k in kfs]), drift or self.config.loops.gate.drift, keys=kfs,
                             step_cov=np.array(self.kf_step_cov[ia:ib + 1]), height=self.camera.camera_height)
         return chain(a, b)
 
+    def _keyframe_motion_unscaled(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """`_keyframe_motion` without the drift model's scale term (anchored paths add it once, jointly)."""
+        return self._keyframe_motion(a, b, self.config.loops.gate.drift.replace(trans_fraction=0.0))
+
     def _anchors(self) -> list[Anchor]:
         """Accepted loops with a floor fit that the back end has not rejected (the motion gate's anchors)."""
-        return [Anchor(r.match_frame, r.query_frame, r.delta, r.covariance) for r in self.graph_loops
-                if r.inlier is not False]
+        return [self._anchor[r.loop_index] for r in self.graph_loops
+                if r.inlier is not False and self._support[r.loop_index] >= self.config.loops.gate.anchor_support]
+
+    def _add_anchor(self, rec: LoopRecord) -> None:
+        """Count the support of a newly accepted loop: earlier accepted loops (the last few) that agree with it."""
+        gp = self.config.loops.gate
+        x = Anchor(rec.match_frame, rec.query_frame, rec.delta, rec.covariance)
+        self._anchor[rec.loop_index] = x
+        self._support[rec.loop_index] = 1
+        for r in self.graph_loops[-1 - 4 * gp.anchor_search:-1]:
+            if r.inlier is not False and agree(self._keyframe_motion, x, self._anchor[r.loop_index], gp.chi2,
+                                               self._keyframe_motion_unscaled, gp.drift.trans_fraction):
+                self._support[rec.loop_index] += 1
+                self._support[r.loop_index] += 1
 
     def _maybe_optimize(self, force: bool = False) -> None:
         """Batch: re-solve after `optimize_every` new loops (and at the end). Incremental: an iSAM2 update whenever
