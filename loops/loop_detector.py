@@ -49,6 +49,14 @@ class DatabaseParams(Config):
                                  doc="consecutive query keyframes that must agree before a loop is accepted")
     confirm_window: int = setting(5, range="[0, inf)",
                                   doc='"agree": a verified match within this many stored keyframes of the last one')
+    gated_min_probability: float | None = setting(None, range="[0, 1]",
+                                                  doc="with a motion gate: a verified candidate below the verifier's "
+                                                      "threshold (P(loop|score) = 1) still passes when its "
+                                                      "P(loop|score) is at least this, its implied overlap at least "
+                                                      "gated_min_overlap and the gate finds it consistent (None: off)")
+    gated_min_overlap: float = setting(0.33, range="[0, 1]",
+                                       doc="implied image overlap such a gated candidate needs (0.33: the overlap "
+                                           "that defines a loop in the loop model)")
     min_overlap: float | None = setting(None, range="[0, 1]")   # accept only if the verified transform implies at
     #                                     least this image overlap; None: the loop model's min_overlap (0 without a model)
 
@@ -102,6 +110,7 @@ class LoopDetector:
         self._poses: list[np.ndarray | None] = []
         self._left: list[bool] = []             # the camera has left this keyframe's footprint
         self._pending: list[int] = []           # indices not left yet (their footprint still overlaps the latest)
+        self.lookalikes = 0                     # verified candidates above threshold that the gate refused
         self._history: deque[list[int]] = deque(maxlen=max(1, self.policy.confirmations - 1))
 
     def __len__(self) -> int:
@@ -176,16 +185,18 @@ class LoopDetector:
                 if kept >= self.policy.shortlist:
                     break
         consistent = {i: self._consistent(i, key, v) for i, _, v in verified}
+        # look-alikes: candidates above the verifier's threshold that the motion put elsewhere (the floor repeats)
+        self.lookalikes += sum(1 for i, _, v in verified if self._passes(v) and consistent[i] is False)
         resolve = getattr(self.gate, "resolve", None)
         if resolve is not None and key is not None:
             gated = [i for i, c in consistent.items() if c]
             kept_keys = set(resolve(key, [self._keys[i] for i in gated])) if gated else set()
             for i in gated:
                 consistent[i] = self._keys[i] in kept_keys
-        passing = [i for i, _, v in verified if self._passes(v) and consistent[i] is not False]
+        passing = [i for i, _, v in verified if self._passes_gated(v, consistent[i])]
         out = []
         for i, score, v in verified:
-            passes = self._passes(v) and consistent[i] is not False
+            passes = self._passes_gated(v, consistent[i])
             out.append(LoopCandidate(self._keys[i], score, v, passes, passes and self._confirmed(i), consistent[i]))
         self._history.append(passing)
         out.sort(key=lambda c: -c.score)
@@ -193,12 +204,28 @@ class LoopDetector:
 
     def _consistent(self, index: int, key: int | None, v: Verification) -> bool | None:
         """The motion gate's verdict on a verified candidate (None: no gate, or nothing to check)."""
-        if self.gate is None or key is None or not self._passes(v):
+        if self.gate is None or key is None or not (self._passes(v) or self._below_threshold(v)):
             return None
         return bool(self.gate(self._keys[index], key, v))
 
     def _passes(self, v: Verification) -> bool:
         return v.accepted and (self.min_overlap <= 0.0 or v.overlap >= self.min_overlap)
+
+    def _below_threshold(self, v: Verification) -> bool:
+        """A verified candidate below the verifier's threshold that the motion gate may still admit: likely by its
+        score (the threshold is where P(loop|score) reaches 1; below it, a pair is mostly a true partial overlap or a
+        look-alike, and the gate tells the look-alike) and overlapping enough to count as a loop. Only while the
+        run has seen no look-alike above the threshold: on a floor that repeats (a printed floor) the gate's
+        uncertainty after a lap spans several periods, and more candidates only add aliases."""
+        p = self.policy.gated_min_probability
+        return (self.gate is not None and p is not None and self.lookalikes == 0 and not v.accepted and v.probability is not None
+                and v.probability >= p and v.overlap >= max(self.min_overlap, self.policy.gated_min_overlap))
+
+    def _passes_gated(self, v: Verification, consistent: bool | None) -> bool:
+        """Passes: above threshold and not refused by the gate, or below it and confirmed by the gate."""
+        if self._passes(v):
+            return consistent is not False
+        return self._below_threshold(v) and consistent is True
 
     def _confirmed(self, index: int) -> bool:
         need = self.policy.confirmations - 1

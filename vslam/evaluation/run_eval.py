@@ -147,7 +147,11 @@ def evaluate_result(result, seq) -> dict:
                           np.array([l.global_score for l in L]), np.array([l.local_score for l in L]),
                           np.array([l.probability for l in L]), np.array([l.accepted for l in L]),
                           np.array([bool(l.inlier) for l in L]))
-        kw = dict(queried=result.keyframes, min_separation=result.config.database_params().exclude_recent + 1)
+        # positives under the detector's own exclusions, as `vslam eval` counts them from run.json: the same run
+        # must not report two recalls
+        db = result.config.database_params()
+        kw = dict(queried=result.keyframes, min_separation=db.exclude_recent + 1, stamps=result.timestamps,
+                  min_seconds=float(db.exclude_seconds), after_leaving=bool(db.exclude_unleft))
         out["loops"] = {"accepted": loop_precision_recall(result.camera, gt_frames, table, **kw),
                         "kept_by_back_end": loop_precision_recall(result.camera, gt_frames, table, use_inliers=True, **kw)}
     return out

@@ -66,8 +66,12 @@ class LoopConfig(Config):
     # recent keyframes are excluded by time and footprint (loops.loop_detector: a keyframe is a candidate once the
     # camera has left its footprint and it is exclude_seconds old), never by a count: a count of keyframes means
     # seconds at 30 fps and minutes at 0.14 Hz
+    # gated_min_probability 0.5: below the P = 1 threshold, a verified candidate more likely a loop than not by its
+    # score alone is accepted when the motion gate confirms it (slow revisits: the demo's closing keyframes score
+    # 12-19, P 0.85-0.985); chosen on our simulator seeds 1-3 (0.5 against 0.9)
     database: DatabaseParams = field(default_factory=lambda: DatabaseParams(exclude_recent=0, exclude_seconds=2.0,
-                                                                            min_overlap=0.2))
+                                                                            min_overlap=0.2,
+                                                                            gated_min_probability=0.5))
     exclude_distance: float | None = setting(None, range="[0, inf)", unit="m",
                                              doc="also exclude keyframes this far back along the path, as a count "
                                                  "of keyframes at the keyframe spacing (None: time and footprint "

@@ -67,6 +67,22 @@ class MotionGateParams(Config):
                                           "squared is this much larger (6.63 = chi-square 1 dof at 99 %); "
                                           "else none")
     drift: DriftModel = field(default_factory=DriftModel)
+    anchor_loops: bool = setting(True, doc="pipeline: once loops are accepted, judge a candidate against the closed "
+                                           "map (the path through an accepted loop near both keyframes, when it is "
+                                           "more certain than the VO chain), not the VO chain alone")
+    anchor_search: int = setting(4, range="[1, inf)", unit="loops",
+                                 doc="accepted loops, nearest along the keyframe chain first, tried as anchors")
+    anchor_support: int = setting(2, range="[1, inf)", unit="loops",
+                                  doc="an accepted loop anchors the gate once this many accepted loops (itself "
+                                      "included) agree with each other through short paths (1: at once); a lone "
+                                      "alias then cannot steer the gate")
+    refuse_ambiguous: bool = setting(False, doc="pipeline: once a query has matched two places that cannot both be "
+                                                "right, refuse every candidate whose gate is wide enough to pass a "
+                                                "place that far off as well (undecidable from the motion)")
+    cluster_queries: int = setting(0, range="[0, inf)", unit="query keyframes",
+                                   doc="pipeline, on a floor with look-alikes (a verified candidate the motion "
+                                       "refused): a loop not anchored by an accepted one needs a candidate of one "
+                                       "of this many previous queries agreeing with it (0: off)")
     drift_in_graph: bool = setting(True, doc="pipeline: the pose graph's odometry edges carry the drift model's "
                                              "per-step variance too (the VO's own covariance is random noise only: "
                                              "beside it, true loops look inconsistent and the back end drops them)")
