@@ -164,6 +164,16 @@ class RobustParams(Config):
                                    "loop by loop (graph.robust); 0: off")
     odometry_start: bool = setting(True, doc="also run GNC from the odometry chain; keep the lower TLS objective")
     cluster_weights: bool = setting(False, doc="one GNC weight per cluster of agreeing loops instead of per loop")
+    kernel_start: bool = setting(True, doc="when some supported loop does not fit at the supported start, also start "
+                                           "from a DCS-kernel solve from the odometry chain followed by TLS descent "
+                                           "(graph.kernel_start); the lowest TLS objective wins")
+    kernel_phi: float = setting(1.0, range="(0, inf)", unit="x variance factor",
+                                doc="DCS kernel width of that start (Agarwal et al. 2013: 1) on r^2 in the loops' "
+                                    "stated units times the variance factor of the agreeing cycles (public graphs "
+                                    "state noise 10-1000x too loose)")
+    kernel_descent_rounds: int = setting(10, range="[1, inf)", unit="solves",
+                                         doc="at most this many re-solves of its TLS descent (keep the loops that "
+                                             "fit, re-solve, until the set is stable)")
     huber_k: float = setting(1.345, range="(0, inf)", doc="kernel width on the whitened residual norm")
     cauchy_k: float = setting(1.0, range="(0, inf)")
     loop_weighting: LoopWeighting = LoopWeighting.THRESHOLD

@@ -4,7 +4,9 @@
    clusters (connected components); a loop without support is its own cluster. Drift does not enter this test.
 2. start: least squares on odometry + the supported loops, initialised by LAGO (2D) / chordal (3D) on that subset,
    so the start already carries the loop corrections however large the drift was (a start from the drifted
-   odometry chain makes every true loop look like an outlier: ring, 8 m of drift).
+   odometry chain makes every true loop look like an outlier: ring, 8 m of drift). When some supported loop does
+   not fit there, also GNC from the odometry chain and a DCS-kernel solve + TLS descent (graph.kernel_start);
+   the lowest TLS objective wins.
 3. GNC with truncated least squares (Yang et al. 2020), odometry and anchor as known inliers, one weight per
    cluster: a cluster's squared residual is the sum over its loops, its threshold the sum of their chi-square
    thresholds. A group of mutually consistent false loops is thus one hypothesis that the rest of the map accepts
@@ -24,6 +26,7 @@ from scipy.stats import chi2
 from graph.batch import build, initial_guess, lm_params, resolve_init
 from graph.factors import array_from_values, graph_of, squared_residuals, values_from_array
 from graph.gnc import tls_weights
+from graph.kernel_start import dcs_solve, tls_descent
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.result import GraphResult
@@ -214,7 +217,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             starts.append(("supported loops", v))
         except RuntimeError:
             notes.append("LAGO / chordal start on the supported loops failed")
-    scale = 1.0
+    scale = sigma0 = 1.0
     if params.robust.calibrate_noise and len(pairs[2]) >= params.robust.calibration_min_loops:
         # variance factor from the agreeing cycles: their median error over the chi-square median. Local, so
         # neither drift nor a false loop bending the map (both inflate a global a-posteriori estimate) enter it
@@ -232,14 +235,18 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     sub = built.subset(cand)
     _, sub_label = np.unique(label[cand], return_inverse=True)
 
-    def run(name: str, v0: gtsam.Values):
+    def run(name: str, v0: gtsam.Values, descent: bool = False):
         nonlocal best, iters
-        values, kept, outer, it = gnc_tls(base, sub.loops, v0, c2[cand], sub_label, params)
-        iters += it
+        if descent:     # the kernel start: no convex surrogate (graph.kernel_start)
+            values, kept, outer = tls_descent(base, sub.loops, v0, c2[cand], params,
+                                              params.robust.kernel_descent_rounds)
+        else:
+            values, kept, outer, it = gnc_tls(base, sub.loops, v0, c2[cand], sub_label, params)
+            iters += it
         inlier = np.zeros(L, bool)
         inlier[cand] = kept
         f = tls_objective(base_graph, sub.loops, values, c2[cand])
-        notes.append(f"start {name}: GNC {outer} steps, TLS objective {f:.6g}, {int(kept.sum())} loops kept")
+        notes.append(f"start {name}: {'TLS descent' if descent else 'GNC'} {outer} steps, TLS objective {f:.6g}, {int(kept.sum())} loops kept")
         if best is None or f < best[0]:
             best = (f, values, inlier, outer == 0 and bool(kept.all()))
 
@@ -253,6 +260,11 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         # happened; the second start (the slowest solve: drift makes its GNC start near-convex) is skipped.
         # (A weaker sign, a cluster of agreeing loops split by the solution, misses ring random-grouped.)
         run("odometry", odometry_values)
+        if params.robust.kernel_start:
+            # groups of consistent false loops spread over the map bend GNC's convex surrogate itself, from either
+            # start (manhattan random-grouped): a DCS solve from the odometry chain never forms it
+            run("DCS kernel", dcs_solve(base, sub.loops, odometry_values, params.robust.kernel_phi * sigma0, params),
+                descent=True)
     else:
         notes.append("odometry start skipped: every supported loop fits at the supported start")
     _, values, inlier, _ = best
