@@ -14,9 +14,9 @@ observable from images, and the chain's errors add up like a random walk. So:
   departure, d * S^2 / (S^2 + sigma_d^2), with sigma_d^2 the variance the chain accumulated over the window (the
   links' own variances, from the refinement) plus, before the window is full, the uncertainty of the anchor (its
   missing share times the spread of the heights seen so far: the first frame's own departure is not known), and
-  S^2 the spread the heights really have over the window (their spread less the part the chain's random walk
-  alone makes, V / 6 for a walk of variance V). A camera whose height does not vary keeps (close to) the nominal
-  height, one that bounces or climbs gets it followed in proportion to how well it is measured;
+  S^2 the spread the heights really have over the window (their spread less what the chain's random walk alone
+  may make: `noise_spread` times its variance V over the window). A camera whose height does not vary keeps
+  (close to) the nominal height, one that bounces or climbs gets it followed in proportion to how well it is measured;
 - or, without `graded`, a hard switch: d is used only when |d| > `significance` * sigma_d, else the keyframe is
   put at the nominal height. It throws away real departures below the threshold (up to ~0.6 % on a planks floor
   whose links are poorly measured in turns) and uses the noisy ones above it in full.
@@ -54,11 +54,16 @@ class HeightTracker:
     >>> kf_height = tr.anchor(frame_height)    # when the frame starts a keyframe
     """
 
-    def __init__(self, nominal: float, window: float, significance: float, graded: bool = False) -> None:
+    def __init__(self, nominal: float, window: float, significance: float, graded: bool = False,
+                 noise_spread: float = 1.0) -> None:
         self.nominal = float(nominal)
         self.window = float(window)
         self.significance = float(significance)
         self.graded = bool(graded)
+        # the share of the window's chained variance V taken to be noise in the heights' spread: a random walk of
+        # variance V spreads about its mean by V / 6 on average, but the links' own variances can be too small
+        # (NEES ~4 on our simulator, whose tilt wobble couples to the height), so all of V by default
+        self.noise_spread = float(noise_spread)
         self._frames: deque[tuple[float, float, float]] = deque()  # (t, log_rel, variance)
         self._sum = 0.0
         self._sum2 = 0.0
@@ -99,8 +104,8 @@ class HeightTracker:
         chain = max(height.variance - self._frames[0][2], 0.0)
         var = chain + (1.0 - full) ** 2 * spread2
         # the spread the heights really have: what the window's heights spread, less what the chain's random walk
-        # alone spreads them by (a random walk of variance V over a window spreads about its mean by V / 6)
-        signal = max(spread2 - chain / 6.0, 0.0)
+        # alone may spread them by (`noise_spread` V; see __init__)
+        signal = max(spread2 - self.noise_spread * chain, 0.0)
         return height.log_rel - full * mean, math.sqrt(var), signal
 
     def graded_departure(self, height: Height) -> float:
