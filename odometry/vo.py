@@ -224,7 +224,7 @@ class VOConfig(Config):
     # the prior variance of the graded estimate is the heights' spread over the window less this share of the
     # chain's accumulated variance V. A pure random walk spreads by V / 6 on average; the links' variances are
     # too small by ~4x on our simulator (its tilt wobble couples to the height), so all of V: measured on the
-    # tuning runs, 1/6 -> 1 moved render_floor's by <= 0.017 % and our 5 cm camera run 0.025 -> 0.021 % ATE
+    # tuning runs, 1/6 -> 1 moved render_floor's rows by <= 0.004 % and our 5 cm camera run 0.025 -> 0.021 % ATE
     height_noise_spread: float = setting(1.0, range="[0, inf)", unit="x chain variance",
                                          doc="share of the chained height variance taken as noise in the graded "
                                              "estimate's prior")
