@@ -16,7 +16,7 @@ observable from images, and the chain's errors add up like a random walk. So:
   missing share times the spread of the heights seen so far: the first frame's own departure is not known), and
   S^2 the spread the heights really have over the window (their spread less what the chain's random walk alone
   may make: `noise_spread` times its variance V over the window). A camera whose height does not vary keeps
-  (close to) the nominal height, one that bounces or climbs gets it followed in proportion to how well it is measured;
+  (close to) the nominal height, one that bounces or climbs gets it followed as far as it is measured;
 - or, without `graded`, a hard switch: d is used only when |d| > `significance` * sigma_d, else the keyframe is
   put at the nominal height. It throws away real departures below the threshold (up to ~0.6 % on a planks floor
   whose links are poorly measured in turns) and uses the noisy ones above it in full.

@@ -18,10 +18,10 @@ LINK_SIGMA = 3e-4     # per keyframe link, relative (what the refinement reports
 
 
 def _run(true_log: np.ndarray, rng: np.random.Generator, significance: float = 3.0, window: float = 10.0,
-         graded: bool = False, link_sigma: float = LINK_SIGMA):
+         graded: bool = False, link_sigma: float = LINK_SIGMA, noise_spread: float = 1.0):
     """Chain keyframe-relative height measurements (true ratio + N(0, link_sigma)) through a tracker the way the
     VO does; return the metres given to each keyframe and the true heights there."""
-    tr = HeightTracker(NOMINAL, window, significance, graded)
+    tr = HeightTracker(NOMINAL, window, significance, graded, noise_spread)
     kf = tr.anchor(Height(NOMINAL))
     kf_true = true_log[0]
     tr.observe(0.0, kf)
@@ -93,7 +93,7 @@ def _vo_tracker_run(true_log: np.ndarray, seed: int, link_sigma: float):
     """`_run` with the tracker settings of the default VOConfig."""
     c = VOConfig()
     return _run(true_log, np.random.default_rng(seed), c.height_significance, c.height_window, c.height_graded,
-                link_sigma)
+                link_sigma, c.height_noise_spread)
 
 
 def test_the_default_height_estimate_follows_a_bounce_its_links_measure_poorly():
