@@ -47,7 +47,8 @@ TEXTURES = ("skimage_cc0/gravel.png", "gazebo_models_ccby3/cloverleaf_interchang
             "gazebo_models_ccby3/cloverleaf_interchange__grass.png", "aws_robomaker_mit0/racetrack_Ground_01_grass_dirt.png",
             "skimage_cc0/grass.png", "gazebo_models_ccby3/vrc_driving_terrain__grass_dry.png",
             "gazebo_models_ccby3/cloverleaf_interchange__road.png", "gazebo_models_ccby3/robocup09_spl_field__carpet.jpg",
-            "aws_robomaker_mit0/house_FloorB_01_wood_planks.png", "skimage_cc0/brick.png")
+            "aws_robomaker_mit0/house_FloorB_01_wood_planks.png", "skimage_cc0/brick.png",
+            "gazebo_models_ccby3/drc_practice_wood_slats__wood_slats.png")
 # tuning half (looked at while developing the descriptor path; e.g. a wrong ORB-only re-acquisition on seed 2 led
 # to LK confirmation, a lost lane change on seed 13 to descriptors on the previous frame with its own corners):
 # render_floor seeds 1-3, our lanes seeds 11 and 13, and the default demo sequence (carpet, seed 0) used to choose
@@ -56,7 +57,10 @@ TEXTURES = ("skimage_cc0/gravel.png", "gazebo_models_ccby3/cloverleaf_interchang
 # (never on the `vslam bench odometry` sequences, seeds 0-3). The rest is the reporting half.
 TUNING = {"render_floor gravel+concrete s1 1/22", "ours lanes grass h40 s11", "render_floor lawn+grass-dirt s2 1/22",
           "render_floor grass+dry-grass s3 1/38", "ours lanes gravel h100 0.1Hz 60% s13",
-          "render_floor grass+dry-grass s21 30fps", "render_floor road+carpet s22 30fps"}
+          "render_floor grass+dry-grass s21 30fps", "render_floor road+carpet s22 30fps",
+          # the graded height estimate (odometry.height) was developed on edge-like floors other than the reporting
+          # wood planks + brick pair: they showed the same failure (> 0.3 % per metre with the 3-sigma switch)
+          "render_floor wood-slats s35 30fps", "render_floor brick s36 30fps", "render_floor wood-slats+brick s38 30fps"}
 
 
 @dataclass(frozen=True)
@@ -144,7 +148,10 @@ def regimes() -> list[Regime]:
                               "render_floor lawn+grass-dirt s5 30fps": ((2, 3), 5),
                               "render_floor wood-planks+brick s23 30fps": ((8, 9), 23),
                               "render_floor grass+dry-grass s21 30fps": ((4, 5), 21),
-                              "render_floor road+carpet s22 30fps": ((6, 7), 22)}.items():
+                              "render_floor road+carpet s22 30fps": ((6, 7), 22),
+                              "render_floor wood-slats s35 30fps": ((10,), 35),
+                              "render_floor brick s36 30fps": ((9,), 36),
+                              "render_floor wood-slats+brick s38 30fps": ((10, 9), 38)}.items():
         r.append(Regime(name, "render_floor", render_floor_sequence(tex, seed, 1, name), fallback=True))
     return r
 
