@@ -33,6 +33,7 @@ from graph.gnc import gnc_optimize
 from graph.initial import InitialGuessError, chordal_guess, lago_guess, spanning_tree_guess
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GncImpl, GncLoss, GraphParams, InitMethod, RobustMode
+from graph.residuals import LoopResiduals
 from graph.result import GraphResult
 from graph.thresholds import fence_scale, information_scale, loop_thresholds
 
@@ -63,11 +64,20 @@ class BuiltGraph:
     anchors: np.ndarray
     a: np.ndarray
     b: np.ndarray
+    residuals: LoopResiduals | None = None      # vectorised r^2 of `loops` (graph.residuals)
 
     def subset(self, keep: np.ndarray) -> "BuiltGraph":
         """The same graph with only the loops selected by a boolean mask over `loops`."""
+        keep = np.asarray(keep, bool)
         return BuiltGraph(self.priors, self.odometry, [f for f, k in zip(self.loops, keep.tolist()) if k],
-                          self.odo_idx, self.loop_idx[keep], self.anchors, self.a, self.b)
+                          self.odo_idx, self.loop_idx[keep], self.anchors, self.a, self.b,
+                          None if self.residuals is None else self.residuals.subset(keep))
+
+    def r2(self, values: gtsam.Values) -> np.ndarray:
+        """Squared Mahalanobis residual of every loop at `values` (= squared_residuals(loops, values))."""
+        if self.residuals is None:
+            return squared_residuals(self.loops, values)
+        return self.residuals(values)
 
     def graph(self, keep: np.ndarray | None = None) -> gtsam.NonlinearFactorGraph:
         loops = self.loops if keep is None else [f for f, k in zip(self.loops, keep.tolist()) if k]
@@ -82,8 +92,10 @@ def build(data: PoseGraphData, params: GraphParams) -> BuiltGraph:
     loop_idx = np.flatnonzero(data.is_loop)
     priors = prior_factors(data, anchors, data.poses, params.solver.anchor_sigma)
     odometry = between_factors(data, odo_idx, a, b, cache=cache)
-    loops = between_factors(data, loop_idx, a, b, information_scale(data.probability[loop_idx], params), cache)
-    return BuiltGraph(priors, odometry, loops, odo_idx, loop_idx, anchors, a, b)
+    scale = information_scale(data.probability[loop_idx], params)
+    loops = between_factors(data, loop_idx, a, b, scale, cache)
+    return BuiltGraph(priors, odometry, loops, odo_idx, loop_idx, anchors, a, b,
+                      LoopResiduals.of_edges(data, loop_idx, a, b, loops, scale))
 
 
 def initial_guess(data: PoseGraphData, built: BuiltGraph, method: InitMethod) -> np.ndarray:

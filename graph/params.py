@@ -162,6 +162,10 @@ class RobustParams(Config):
                                    "(those nearest their thresholds first) and drop a cluster whose absence lowers "
                                    "the TLS objective: a group of consistent false loops the map bent to fits "
                                    "loop by loop (graph.robust); 0: off")
+    group_joint_screen: bool = setting(True, doc="before the group test's one screen per cluster, one warm solve "
+                                                 "with all the tested clusters left out: those whose loops all "
+                                                 "still fit there are passed (graph.robust; a cost bound, false: "
+                                                 "every cluster screened on its own)")
     odometry_start: bool = setting(True, doc="also run GNC from the odometry chain; keep the lower TLS objective")
     cluster_weights: bool = setting(False, doc="one GNC weight per cluster of agreeing loops instead of per loop")
     kernel_start: bool = setting(True, doc="when some supported loop does not fit at the supported start, also start "
