@@ -759,10 +759,12 @@ class VisualOdometry:
         # keep or renew the keyframe
         c = self.config
         n_in = fit.n_inliers
-        # a frame that needed a retry or descriptors is far from the keyframe (or the prediction is poor): renew,
-        # so the next frame is matched to a close keyframe (at a low rate the next one would barely overlap); and
-        # renew when the next frame, moving on as this one did, would see too few of the keyframe's corners
-        renew = (method != Method.LK or n_in < c.keyframe_min_inliers
+        # a frame that needed descriptors (or a shift search) is far from the keyframe: renew, so the next frame is
+        # matched to a close keyframe (at a low rate the next one would barely overlap); and renew when the next
+        # frame, moving on as this one did, would see too few of the keyframe's corners. A deep-pyramid LK retry
+        # alone does not renew: at high rates it only means a poor constant-velocity prediction, and renewing there
+        # chained 1.7x the keyframes (100 m carpet: 524 vs 317, VO end error 14.0 vs 5.8 cm)
+        renew = (method not in (Method.LK, Method.LK_PYRAMID) or n_in < c.keyframe_min_inliers
                  or n_in < c.keyframe_min_fraction * len(kf.pts) or abs(fit.delta[2]) > c.keyframe_max_rotation
                  or self._visible(kf, compose(fit.delta, delta)) < c.keyframe_min_inliers)
         if renew and self._start_keyframe(gray, index, timestamp):
