@@ -3,27 +3,8 @@ demo's closing keyframes verify with P(loop|score) 0.85-0.985, below the P = 1 t
 from __future__ import annotations
 
 from loops.loop_detector import DatabaseParams, LoopDetector
-from loops.recognition import Ranked, Verification
-
-
-class Stored:
-    """Retrieval returns every eligible stored key, newest first."""
-
-    def __init__(self):
-        self.keys = []
-
-    def observe(self, image):
-        return image
-
-    def add(self, key, obs):
-        self.keys.append(key)
-
-    def query(self, obs, top=None, among=None):
-        keys = self.keys[:among if among is not None else len(self.keys)]
-        return [Ranked(k, 1.0) for k in reversed(keys)][:top]
-
-    def __len__(self):
-        return len(self.keys)
+from loops.recognition import Verification
+from tests.loops._fakes import SamePlace
 
 
 class ByObservation:
@@ -42,7 +23,7 @@ def above() -> Verification:
 
 
 def run(observations, gate, p=0.5, query_key=10):
-    det = LoopDetector(Stored(), ByObservation(), DatabaseParams(exclude_recent=0, gated_min_probability=p), gate=gate)
+    det = LoopDetector(SamePlace(), ByObservation(), DatabaseParams(exclude_recent=0, gated_min_probability=p), gate=gate)
     for k, obs in enumerate(observations):
         det.add(k, obs)
     return det, det.query(None, key=query_key)
@@ -64,7 +45,7 @@ def test_below_threshold_needs_the_gate_the_probability_and_the_overlap():
 
 def test_after_a_look_alike_only_the_threshold_admits_loops():
     # key 0 passes the verifier but the gate puts it elsewhere: the floor repeats
-    det = LoopDetector(Stored(), ByObservation(), DatabaseParams(exclude_recent=0, gated_min_probability=0.5),
+    det = LoopDetector(SamePlace(), ByObservation(), DatabaseParams(exclude_recent=0, gated_min_probability=0.5),
                        gate=lambda c, q, v: c != 0)
     det.add(0, above())
     det.add(1, below())
@@ -73,7 +54,7 @@ def test_after_a_look_alike_only_the_threshold_admits_loops():
     # the same likely candidate that would pass on a floor without look-alikes is no longer admitted below threshold
     second = {c.key: c.accepted for c in det.query(None, key=11)}
     assert second[1] is False
-    fresh = LoopDetector(Stored(), ByObservation(), DatabaseParams(exclude_recent=0, gated_min_probability=0.5),
+    fresh = LoopDetector(SamePlace(), ByObservation(), DatabaseParams(exclude_recent=0, gated_min_probability=0.5),
                          gate=lambda c, q, v: c != 0)
     fresh.add(1, below())
     assert [c.accepted for c in fresh.query(None, key=11)] == [True]

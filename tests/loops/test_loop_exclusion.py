@@ -1,41 +1,17 @@
 """Loop exclusion by time and footprint (not a count of keyframes), and the motion gate of standalone loops."""
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from loops.loop_detector import DatabaseParams, LoopDetector
-from loops.recognition import Ranked, Verification
+from loops.recognition import Verification
 from odometry.shared.camera import CameraModel
 from odometry.shared.footprint import overlap_pairs
 from odometry.shared.poses import between
-from tests._tools import render_floor_tool
+from tests._tools import render_floor_tool, render_printed_floor
+from tests.loops._fakes import SamePlace
 from vslam.pipeline.motion_gate import ChainMotion, MotionGate
-
-
-class SamePlace:
-    """Every stored key looks the same: retrieval returns all eligible keys, newest first."""
-
-    def __init__(self):
-        self.keys = []
-
-    def observe(self, image):
-        return image
-
-    def add(self, key, obs):
-        self.keys.append(key)
-
-    def query(self, obs, top=None, among=None):
-        keys = self.keys[:among if among is not None else len(self.keys)]
-        return [Ranked(k, 1.0) for k in reversed(keys)][:top]
-
-    def __len__(self):
-        return len(self.keys)
 
 
 class AcceptAll:
@@ -126,10 +102,7 @@ def test_standalone_loops_on_a_printed_floor_join_no_non_overlapping_places(tmp_
     from vslam.evaluation.loops import read_loops_csv
     from vslam.io import open_sequence
 
-    tex = Path(os.environ["VSLAM_SHARED_DATA"]) / "textures" / "aws_robomaker_mit0" / "house_FloorB_01_wood_planks.png"
-    seq_dir = tmp_path / "printed"
-    subprocess.run([sys.executable, str(render_floor_tool()), str(seq_dir), "--textures", str(tex), "--printed",
-                    "--laps", "2", "--fps", "10", "--seed", "1"], check=True, stdout=subprocess.DEVNULL)
+    seq_dir = render_printed_floor(tmp_path / "printed", seed=1)
     seq = open_sequence(seq_dir)
     gt = seq.groundtruth_planar()
 

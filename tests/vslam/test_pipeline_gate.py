@@ -8,11 +8,6 @@ overlap, where appearance alone accepts many.
 """
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -21,7 +16,7 @@ from loops.recognition import Ranked, Verification
 from odometry.shared.camera import CameraModel
 from odometry.shared.footprint import overlap_pairs
 from odometry.shared.poses import between
-from tests._tools import render_floor_tool
+from tests._tools import render_floor_tool, render_printed_floor
 from vslam.io import open_sequence
 from vslam.pipeline import Pipeline, PipelineConfig
 from vslam.pipeline.motion_gate import ChainMotion, DriftModel, MotionGate, MotionGateParams
@@ -153,10 +148,7 @@ def test_a_query_matching_places_that_cannot_both_be_right_keeps_none():
 
 @pytest.mark.skipif(render_floor_tool() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
 def test_pipeline_on_a_printed_floor_accepts_no_loop_between_non_overlapping_places(tmp_path):
-    tex = Path(os.environ["VSLAM_SHARED_DATA"]) / "textures" / "aws_robomaker_mit0" / "house_FloorB_01_wood_planks.png"
-    seq_dir = tmp_path / "printed"
-    subprocess.run([sys.executable, str(render_floor_tool()), str(seq_dir), "--textures", str(tex), "--printed",
-                    "--laps", "2", "--fps", "10", "--seed", "3"], check=True, stdout=subprocess.DEVNULL)
+    seq_dir = render_printed_floor(tmp_path / "printed", seed=3)
     seq = open_sequence(seq_dir)
     gt = seq.groundtruth_planar()
     base = PipelineConfig()
