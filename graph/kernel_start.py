@@ -20,8 +20,8 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from graph.batch import lm_params
-from graph.factors import graph_of, squared_residuals
+from graph.batch import BuiltGraph, lm_params
+from graph.factors import graph_of
 from graph.params import GraphParams
 
 
@@ -34,18 +34,19 @@ def dcs_solve(base: list, loops: list, values: gtsam.Values, phi: float, params:
     return opt.optimize()
 
 
-def tls_descent(base: list, loops: list, values: gtsam.Values, c2: np.ndarray, params: GraphParams,
+def tls_descent(base: list, loops: BuiltGraph, values: gtsam.Values, c2: np.ndarray, params: GraphParams,
                 rounds: int) -> tuple[gtsam.Values, np.ndarray, int]:
-    """Keep the loops whose r^2 is within their threshold c2, re-solve with those (LM), repeat until the kept set
-    no longer changes (at most `rounds` solves). Each round lowers the TLS objective or leaves it: the re-solve
-    lowers the kept loops' cost, and the new set takes min(r^2, c2) per loop. Returns (values, kept, solves)."""
-    kept = squared_residuals(loops, values) <= c2
+    """Keep the loops of `loops` whose r^2 (vectorised, graph.residuals) is within their threshold c2, re-solve
+    with those (LM), repeat until the kept set no longer changes (at most `rounds` solves). Each round lowers the
+    TLS objective or leaves it: the re-solve lowers the kept loops' cost, and the new set takes min(r^2, c2) per
+    loop. Returns (values, kept, solves)."""
+    kept = loops.r2(values) <= c2
     solves = 0
     for _ in range(rounds):
-        g = graph_of(base + [f for f, k in zip(loops, kept.tolist()) if k])
+        g = graph_of(base + [f for f, k in zip(loops.loops, kept.tolist()) if k])
         values = gtsam.LevenbergMarquardtOptimizer(g, values, lm_params(params)).optimize()
         solves += 1
-        new = squared_residuals(loops, values) <= c2
+        new = loops.r2(values) <= c2
         if np.array_equal(new, kept):
             break
         kept = new

@@ -262,7 +262,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     def run(name: str, v0: gtsam.Values, descent: bool = False):
         nonlocal best, iters
         if descent:     # the kernel start: no convex surrogate (graph.kernel_start)
-            values, kept, outer = tls_descent(base, sub.loops, v0, c2[cand], params,
+            values, kept, outer = tls_descent(base, sub, v0, c2[cand], params,
                                               params.robust.kernel_descent_rounds)
         else:
             values, kept, outer, it = gnc_tls(base, sub, v0, c2[cand], sub_label, params)

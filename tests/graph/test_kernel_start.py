@@ -29,7 +29,7 @@ def test_tls_descent_from_a_kernel_solve_drops_a_false_group():
     odo = values_from_array(2, initial_guess(bad, built, InitMethod.ODOMETRY))
     v = dcs_solve(base, built.loops, odo, 1e3, GraphParams())
     c2 = np.full(len(built.loops), 11.34 * 10)
-    v, kept, solves = tls_descent(base, built.loops, v, c2, GraphParams(), 10)
+    v, kept, solves = tls_descent(base, built, v, c2, GraphParams(), 10)
     assert not kept[-10:].any() and kept[:-10].all()
     assert 1 <= solves <= 10
     # the descent never ends above its start in the TLS objective
