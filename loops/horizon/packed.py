@@ -19,8 +19,11 @@ tests check it on real frames); the RANSAC line has no batched form here. Requir
 from __future__ import annotations
 
 import functools
+import importlib
+import importlib.util
 import math
 from dataclasses import dataclass
+from types import ModuleType
 
 import cv2
 import numpy as np
@@ -98,6 +101,34 @@ class PackedMatch:
         return int(self.x_test.shape[0])
 
 
+# The compiled kernels (loops.horizon.packed_jit, numba: the optional extra `fast`) are loaded on first use, not
+# at import: importing numba costs about 0.3 s, which a process that never extracts a packed view should not pay.
+# Without numba (or with a numba that fails to import) the numpy code below is used; both give the same features.
+_JIT: list = []     # [] not tried yet; [module] or [None] once tried
+
+
+def compiled_kernels() -> ModuleType | None:
+    """The compiled kernels module, or None when numba is not installed or does not import."""
+    if not _JIT:
+        mod = None
+        if importlib.util.find_spec("numba") is not None:
+            try:
+                mod = importlib.import_module("loops.horizon.packed_jit")
+            except ImportError:
+                mod = None
+        _JIT.append(mod)
+    return _JIT[0]
+
+
+def _use_compiled(compiled: bool | None) -> ModuleType | None:
+    if compiled is False:
+        return None
+    mod = compiled_kernels()
+    if mod is None and compiled:
+        raise HorizonError("the compiled packed path needs numba: pip install 'vslam[fast]' (or numba)")
+    return mod
+
+
 def uses_packed(params: HorizonParams) -> bool:
     """Whether the landmark memory, the recogniser and `vslam horizon` score through this module with `params`
     (preset `fast` does): a fixed number of slots per band, shift consensus, the sign test, no one-to-one."""
@@ -153,6 +184,22 @@ class _BandPlan:
     low: int                    # 2^bits - 1 > M: the low bits of a sort key that carry the code
     m: int                      # candidates per band
     n: int
+    jit: "JitPlan"              # the same candidates for the compiled kernels (loops.horizon.packed_jit)
+
+
+@dataclass(frozen=True)
+class JitPlan:
+    """Tables of packed_jit.extract_kernel: per band candidate (separators included: weight 0, look-ups 0) its
+    look-ups in surf1d's own padded integral (surf1d's padding, not the reduced one above), as contiguous arrays."""
+
+    rows: np.ndarray            # (B * band_height,) int64 image rows, band after band
+    geo: np.ndarray             # int64 [n, step, box 0/1, surf1d pad, band_height, sort-key low mask]
+    resp_look: np.ndarray       # (M, 4) int64
+    resp_w: np.ndarray          # (M,)
+    desc_look: np.ndarray       # (M, S + 2) int64
+    x: np.ndarray               # (M,)
+    gauss: np.ndarray           # (S,) Gaussian weight of each descriptor sample (surf1d's desc_abs)
+    sub: np.ndarray             # (S,) int64 its subregion
 
 
 # Multiply-adds per band of the dense product above which the gather path is used: the two cost the same between
@@ -257,11 +304,31 @@ def _band_plan_cached(height: int, width: int, row: float, params: HorizonParams
     desc_haar[:n_look, :-1] = plan.desc_haar
     desc_haar[n_look:, -1] = sum_coef                                   # the box-filter sum (its sign: the blob's)
     code = m - 1 - np.arange(n_bands * m) % m
+    j_resp = np.zeros((m, 4), np.int64)
+    j_resp[slots] = plan.resp_idx[:, fit].T
+    j_desc = np.zeros((m, n_look), np.int64)
+    j_desc[slots] = plan.desc_idx[fit]
+    low = (1 << m.bit_length()) - 1
+    jit = JitPlan(rows.astype(np.int64), np.array([n, params.step, int(box), plan.pad, band, low], np.int64), j_resp,
+                  resp_w.copy(), j_desc, x.copy(), plan.desc_abs.sum(axis=1),
+                  (np.argmax(plan.desc_abs, axis=1) // 2).astype(np.int64))
+    # The kernel computes Haar responses as v[s] - 2 v[s+1] + v[s+2] and the signed sums from gauss and sub: that is
+    # surf1d's desc_haar, checked here once per plan so that a change of its layout cannot pass unnoticed.
+    s_n = jit.gauss.size
+    haar = np.zeros((s_n + 2, s_n))
+    haar[np.arange(s_n), np.arange(s_n)], haar[np.arange(s_n) + 1, np.arange(s_n)] = 1.0, -2.0
+    haar[np.arange(s_n) + 2, np.arange(s_n)] = 1.0
+    signed = np.zeros_like(plan.desc_abs)
+    signed[np.arange(s_n), 2 * jit.sub] = jit.gauss
+    if not (np.array_equal(plan.desc_haar, np.concatenate([haar, haar @ signed], axis=1))
+            and np.array_equal(plan.desc_abs[np.arange(s_n), 2 * jit.sub + 1], jit.gauss)):
+        raise AssertionError("surf1d's descriptor tables changed layout: update loops/horizon/packed_jit.py")
+    for a in (jit.rows, jit.geo, jit.resp_look, jit.resp_w, jit.desc_look, jit.x, jit.gauss, jit.sub):
+        a.setflags(write=False)
     out = _BandPlan(None if contiguous else rows, starts[0], acc, lin, ext, resp_flat,
                     np.tile(resp_w, (n_bands, 1)), np.ascontiguousarray(desc_flat.T),
                     np.ascontiguousarray(desc_haar.T), np.ascontiguousarray(desc_abs.T), np.tile(x, n_bands),
-                    code.astype(np.int64), (np.arange(n_bands) * m + m - 1)[:, None], (1 << m.bit_length()) - 1,
-                    m, n)
+                    code.astype(np.int64), (np.arange(n_bands) * m + m - 1)[:, None], low, m, n, jit)
     for a in (rows, out.lin, out.ext, out.resp_flat, out.resp_w, out.desc_t, out.desc_haar, out.desc_abs, out.x,
               out.code, out.null):
         if a is not None:
@@ -269,9 +336,13 @@ def _band_plan_cached(height: int, width: int, row: float, params: HorizonParams
     return out
 
 
-def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonParams) -> PackedBands:
+def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonParams,
+                   compiled: bool | None = None) -> PackedBands:
     """Features of the `params.bands` bands around horizon `row` (a level HorizonLine is accepted), the
     `params.max_features` strongest per band.
+
+    compiled: None (default) runs the compiled kernel when numba is installed, else the numpy code; True requires
+    the kernel (HorizonError without numba); False always runs the numpy code. Same features either way.
 
     About 25 array calls whatever the number of bands (on a small frame their per-call cost is most of the time):
     band sums; one matrix product for every candidate's box-filter sum and every band's padded integral;
@@ -288,6 +359,9 @@ def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonP
     if not 0 <= row <= height - 1:     # bands are moved inside the image at its edges, a horizon is not
         raise HorizonError(f"horizon row {row:g} is outside the image (rows 0..{height - 1})")
     bp = _band_plan(height, width, row, params, image.dtype)
+    jit = _use_compiled(compiled)
+    if jit is not None:
+        return _extract_compiled(jit, image, bp, params)
     n_bands, band = params.bands, params.band_height
     px = image[bp.r0:bp.r0 + n_bands * band] if bp.rows is None else image[bp.rows]
     if params.sample_mode is SampleMode.BOX:     # (B, n) box sums
@@ -336,6 +410,22 @@ def extract_packed(image: np.ndarray, row: float | HorizonLine, params: HorizonP
     return PackedBands(bp.x.take(cand).reshape(params.bands, k_max), keys, top != 0, width)
 
 
+def _extract_compiled(jit: ModuleType, image: np.ndarray, bp: _BandPlan, params: HorizonParams) -> PackedBands:
+    # One kernel instance per image layout: 8-bit frames as they are, anything else as float64 (exact for integer
+    # types); a strided view is copied once.
+    if image.dtype != np.uint8 and image.dtype != np.float64:
+        image = image.astype(np.float64)
+    elif not image.flags.c_contiguous:
+        image = np.ascontiguousarray(image)
+    j, k_max = bp.jit, params.max_features
+    x = np.empty((params.bands, k_max))
+    keys = np.empty((params.bands, k_max, 2 * params.subregions + 1), np.float32)
+    valid = np.empty((params.bands, k_max), np.bool_)
+    jit.extract_kernel(image, j.rows, j.geo, j.resp_look, j.resp_w, j.desc_look, j.x, j.gauss, j.sub,
+                       float(params.threshold), x, keys, valid)
+    return PackedBands(x, keys, valid, image.shape[1])
+
+
 def stack_packed(views: list[PackedBands]) -> PackedSet:
     """Stored views side by side (all from the same bands and max_features)."""
     if not views:
@@ -350,9 +440,11 @@ def stack_packed(views: list[PackedBands]) -> PackedSet:
 
 
 def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
-                 which: np.ndarray | None = None, details: bool = False) -> PackedScores:
+                 which: np.ndarray | None = None, details: bool = False, compiled: bool | None = None
+                 ) -> PackedScores:
     """Scores of `test` against every stored view (or the views `which`), as match_bands with Consensus.SHIFT;
     with `details`, also each view's consensus matches (PackedScores.matches, a PackedMatch per view).
+    compiled: as extract_packed's (details are computed by the numpy code).
 
     Per band: all test features against all stored slots in one product; nearest and second nearest; the ratio
     and sign tests; weights 1 / max(distance, min_distance); NN score = their sum; consensus = the heaviest window
@@ -360,6 +452,9 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
     """
     if params.consensus is not Consensus.SHIFT or not params.match_sign or params.one_to_one:
         raise HorizonError("the packed path matches with consensus 'shift', match_sign true, one_to_one false")
+    jit = None if details else _use_compiled(compiled)
+    if jit is not None:
+        return _match_compiled(jit, test, stored, params, which)
     keys, xs, enough = stored.keys, stored.x, stored.enough
     if which is not None:
         which = np.asarray(which, np.intp)
@@ -435,6 +530,27 @@ def match_packed(test: PackedBands, stored: PackedSet, params: HorizonParams,
         out.append(PackedMatch(float(nn[v]), float(consensus[v]), 1.0 if m.any() else float("nan"), b_d, xt, xv,
                                band[:, v][m]))
     return PackedScores(nn, consensus, out)
+
+
+def _match_compiled(jit: ModuleType, test: PackedBands, stored: PackedSet, params: HorizonParams,
+                    which: np.ndarray | None) -> PackedScores:
+    b, ks, p, d2 = stored.keys.shape
+    if test.keys.shape != (b, ks, d2):
+        raise HorizonError(f"test view of key shape {test.keys.shape} against stored views of {(b, ks, d2)}: "
+                           "they come from different bands / max_features")
+    which = _all_views(p) if which is None else np.asarray(which, np.int64).reshape(-1)
+    nn, cons = np.empty(which.shape[0], np.float32), np.empty(which.shape[0])
+    bad = jit.match_kernel(test.keys, test.x, test.valid, stored.keys, stored.x, stored.enough, which,
+                           float(params.ratio), float(params.min_distance), float(params.ransac_tolerance),
+                           int(params.ransac_min_inliers), nn, cons)
+    if bad:
+        raise HorizonError(f"{bad} stored view indices outside the {p} stored views")
+    return PackedScores(nn, cons)
+
+
+@functools.lru_cache(maxsize=64)
+def _all_views(p: int) -> np.ndarray:
+    return np.arange(p, dtype=np.int64)     # writable, as a caller's `which`: one kernel instance for both
 
 
 def _no_consensus(score: float) -> PackedMatch:
