@@ -193,13 +193,13 @@ class JitPlan:
     look-ups in surf1d's own padded integral (surf1d's padding, not the reduced one above), as contiguous arrays."""
 
     rows: np.ndarray            # (B * band_height,) int64 image rows, band after band
-    geo: np.ndarray             # int64 [n, step, box 0/1, surf1d pad, band_height, sort-key low mask]
+    geo: np.ndarray             # int64 [n, step, box 0/1, surf1d pad, band_height, sort-key low mask, samples per
+    #                             subregion]
     resp_look: np.ndarray       # (M, 4) int64
     resp_w: np.ndarray          # (M,)
     desc_look: np.ndarray       # (M, S + 2) int64
     x: np.ndarray               # (M,)
-    gauss: np.ndarray           # (S,) Gaussian weight of each descriptor sample (surf1d's desc_abs)
-    sub: np.ndarray             # (S,) int64 its subregion
+    gauss: np.ndarray           # (S,) Gaussian weight of each descriptor sample, subregion after subregion
 
 
 # Multiply-adds per band of the dense product above which the gather path is used: the two cost the same between
@@ -309,21 +309,23 @@ def _band_plan_cached(height: int, width: int, row: float, params: HorizonParams
     j_desc = np.zeros((m, n_look), np.int64)
     j_desc[slots] = plan.desc_idx[fit]
     low = (1 << m.bit_length()) - 1
-    jit = JitPlan(rows.astype(np.int64), np.array([n, params.step, int(box), plan.pad, band, low], np.int64), j_resp,
-                  resp_w.copy(), j_desc, x.copy(), plan.desc_abs.sum(axis=1),
-                  (np.argmax(plan.desc_abs, axis=1) // 2).astype(np.int64))
-    # The kernel computes Haar responses as v[s] - 2 v[s+1] + v[s+2] and the signed sums from gauss and sub: that is
-    # surf1d's desc_haar, checked here once per plan so that a change of its layout cannot pass unnoticed.
+    jit = JitPlan(rows.astype(np.int64), np.array([n, params.step, int(box), plan.pad, band, low,
+                                                   params.samples_per_subregion], np.int64),
+                  j_resp, resp_w.copy(), j_desc, x.copy(), plan.desc_abs.sum(axis=1))
+    # The kernel computes Haar responses as v[s] - 2 v[s+1] + v[s+2] and the signed sums from gauss, sample s in
+    # subregion s // samples_per_subregion: that is surf1d's desc_haar / desc_abs, checked here once per plan so
+    # that a change of their layout cannot pass unnoticed.
     s_n = jit.gauss.size
+    sub = np.arange(s_n) // params.samples_per_subregion
     haar = np.zeros((s_n + 2, s_n))
     haar[np.arange(s_n), np.arange(s_n)], haar[np.arange(s_n) + 1, np.arange(s_n)] = 1.0, -2.0
     haar[np.arange(s_n) + 2, np.arange(s_n)] = 1.0
     signed = np.zeros_like(plan.desc_abs)
-    signed[np.arange(s_n), 2 * jit.sub] = jit.gauss
+    signed[np.arange(s_n), 2 * sub] = jit.gauss
     if not (np.array_equal(plan.desc_haar, np.concatenate([haar, haar @ signed], axis=1))
-            and np.array_equal(plan.desc_abs[np.arange(s_n), 2 * jit.sub + 1], jit.gauss)):
+            and np.array_equal(plan.desc_abs[np.arange(s_n), 2 * sub + 1], jit.gauss)):
         raise AssertionError("surf1d's descriptor tables changed layout: update loops/horizon/packed_jit.py")
-    for a in (jit.rows, jit.geo, jit.resp_look, jit.resp_w, jit.desc_look, jit.x, jit.gauss, jit.sub):
+    for a in (jit.rows, jit.geo, jit.resp_look, jit.resp_w, jit.desc_look, jit.x, jit.gauss):
         a.setflags(write=False)
     out = _BandPlan(None if contiguous else rows, starts[0], acc, lin, ext, resp_flat,
                     np.tile(resp_w, (n_bands, 1)), np.ascontiguousarray(desc_flat.T),
@@ -421,7 +423,7 @@ def _extract_compiled(jit: ModuleType, image: np.ndarray, bp: _BandPlan, params:
     x = np.empty((params.bands, k_max))
     keys = np.empty((params.bands, k_max, 2 * params.subregions + 1), np.float32)
     valid = np.empty((params.bands, k_max), np.bool_)
-    jit.extract_kernel(image, j.rows, j.geo, j.resp_look, j.resp_w, j.desc_look, j.x, j.gauss, j.sub,
+    jit.extract_kernel(image, j.rows, j.geo, j.resp_look, j.resp_w, j.desc_look, j.x, j.gauss,
                        float(params.threshold), x, keys, valid)
     return PackedBands(x, keys, valid, image.shape[1])
 

@@ -21,28 +21,47 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
 
 SIGN_KEY = 2.0    # surf1d.SIGN_WEIGHT (passed as a literal: the kernels take no module objects)
 
 
+@intrinsic
+def fma32(typingctx, a, b, c):
+    """a * b + c rounded once, in float32 (LLVM's fma: one instruction where the CPU has it), as BLAS's sgemm sums
+    its products; numba has no fused multiply-add of its own."""
+    sig = types.float32(types.float32, types.float32, types.float32)
+
+    def codegen(context, builder, signature, args):
+        flt = ir.FloatType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [flt], ir.FunctionType(flt, [flt, flt, flt]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
 @numba.njit(cache=True, nogil=True)
-def extract_kernel(image, rows, geo, resp_look, resp_w, desc_look, x_cand, gauss, sub, threshold, out_x, out_keys,
+def extract_kernel(image, rows, geo, resp_look, resp_w, desc_look, x_cand, gauss, threshold, out_x, out_keys,
                    out_valid):
     """Features of every band of `image` into out_x (B, K), out_keys (B, K, D + 1), out_valid (B, K).
 
+    The band's signal, its padded integral and the box-filter sums are float64: exact for integer pixel values.
     rows: (B * band_height,) image rows, band after band. geo: int64 [n samples, step, box sampling 0/1, pad,
-    band_height, low]: signal length, columns per sample, sampling mode, surf1d's integral padding, rows per band,
-    the sort key's low-bit mask. Per candidate j of a band (M, separators included, with weight 0 and look-ups 0):
+    band_height, low, samples per subregion]: signal length, columns per sample, sampling mode, surf1d's integral
+    padding, rows per band, the sort key's low-bit mask, descriptor samples per subregion. Per candidate j of a band (M, separators included, with weight 0 and look-ups 0):
     resp_look (M, 4) look-ups of its box filter in the padded integral, resp_w (M,) response weight, desc_look
-    (M, S + 2) descriptor look-ups, x_cand (M,) image column. gauss (S,), sub (S,): the Gaussian weight and the
-    subregion of each descriptor sample (surf1d's desc_haar / desc_abs, whose structure this uses).
+    (M, S + 2) descriptor look-ups, x_cand (M,) image column. gauss (S,): the Gaussian weight of each descriptor
+    sample, subregion after subregion (surf1d's desc_haar / desc_abs, whose structure this uses).
     """
-    n, step, box, pad, band, low = geo[0], geo[1], geo[2], geo[3], geo[4], geo[5]
+    n, step, box, pad, band, low, per_sub = geo[0], geo[1], geo[2], geo[3], geo[4], geo[5], geo[6]
     n_bands, k_max = out_x.shape
     m = resp_w.shape[0]
-    n_s = gauss.shape[0]
     d = out_keys.shape[2] - 1
     seg = n + 2 * pad
+    width = image.shape[1]
+    colsum = np.zeros(width)
     sig = np.zeros(n)
     integ = np.zeros(seg + 1)
     box_sum = np.zeros(m)
@@ -52,23 +71,30 @@ def extract_kernel(image, rows, geo, resp_look, resp_w, desc_look, x_cand, gauss
     desc = np.zeros(d)
     for b in range(n_bands):
         # The band's signal: column sums every step-th column, or sums over each sample's step columns.
-        sig[:] = 0.0
+        # (Whole rows summed into column sums first: contiguous, vectorised; exact integers on 8-bit frames.)
+        colsum[:] = 0.0
         for r in range(b * band, (b + 1) * band):
             line = image[rows[r]]
+            for c in range(width):
+                colsum[c] += line[c]
+        for i in range(n):
             if box:
-                for i in range(n):
-                    s = 0.0
-                    for c in range(i * step, i * step + step):
-                        s += line[c]
-                    sig[i] += s
+                acc = 0.0
+                for c in range(i * step, i * step + step):
+                    acc += colsum[c]
+                sig[i] = acc
             else:
-                for i in range(n):
-                    sig[i] += line[i * step]
+                sig[i] = colsum[i * step]
         # surf1d's padded integral: the ends replicated pad samples out, a leading 0.
         acc = 0.0
-        for t in range(seg):
-            i = t - pad
-            acc += sig[0 if i < 0 else (n - 1 if i >= n else i)]
+        for t in range(pad):
+            acc += sig[0]
+            integ[t + 1] = acc
+        for t in range(n):
+            acc += sig[t]
+            integ[pad + t + 1] = acc
+        for t in range(pad + n, seg):
+            acc += sig[n - 1]
             integ[t + 1] = acc
         for j in range(m):
             s = (integ[resp_look[j, 0]] - integ[resp_look[j, 1]] - 3.0 * integ[resp_look[j, 2]]
@@ -101,14 +127,21 @@ def extract_kernel(image, rows, geo, resp_look, resp_w, desc_look, x_cand, gauss
             out_valid[b, k] = True
             # Descriptor as surf1d: Haar response dx of size 2q at each sample (three integral look-ups shared
             # with its neighbours), per subregion the Gaussian-weighted sums of dx and |dx|, unit length.
-            desc[:] = 0.0
-            for s in range(n_s):
-                dx = (integ[desc_look[j, s]] - 2.0 * integ[desc_look[j, s + 1]] + integ[desc_look[j, s + 2]])
-                desc[2 * sub[s]] += gauss[s] * dx
-                desc[2 * sub[s] + 1] += gauss[s] * abs(dx)
+            look = desc_look[j]
+            v0, v1 = integ[look[0]], integ[look[1]]
             norm = 0.0
-            for u in range(d):
-                norm += desc[u] * desc[u]
+            for u in range(d // 2):
+                sd = 0.0
+                sa = 0.0
+                for s in range(u * per_sub, (u + 1) * per_sub):
+                    v2 = integ[look[s + 2]]
+                    dx = v0 - 2.0 * v1 + v2
+                    v0, v1 = v1, v2
+                    sd += gauss[s] * dx
+                    sa += gauss[s] * abs(dx)
+                desc[2 * u] = sd
+                desc[2 * u + 1] = sa
+                norm += sd * sd + sa * sa
             norm = np.sqrt(norm + 1e-24)
             for u in range(d):
                 out_keys[b, k, u] = desc[u] / norm
@@ -145,6 +178,8 @@ def match_kernel(t_keys, t_x, t_valid, s_keys, s_x, enough, which, ratio, min_di
     sim = np.zeros((ks, kt), np.float32)
     sim_bits = sim.view(np.int32)
     t_keys_t = np.zeros((d2, kt), np.float32)
+    best1 = np.zeros(kt, np.int32)
+    best2 = np.zeros(kt, np.int32)
     w = np.zeros(kt)
     bins = np.zeros(kt, np.int64)
     ten = np.float32(10.0)      # 2 + 2 * SIGN_KEY^2: |a - b|^2 = 10 - 2 a.b for keys with unit descriptors
@@ -161,33 +196,35 @@ def match_kernel(t_keys, t_x, t_valid, s_keys, s_x, enough, which, ratio, min_di
             p = which[i] if which[i] >= 0 else which[i] + n_views
             if not enough[b, p]:
                 continue
-            # Every stored slot against every test slot: float32 products summed over the key in order, the test
-            # slots side by side (contiguous: the inner loop is vectorised).
+            # Every stored slot against every test slot, the test slots side by side (contiguous: the inner loop is
+            # vectorised). Summed over the key in order with a fused multiply-add in float32, as the numpy path's
+            # BLAS sgemm does: the distances 10 - 2 a.b of near matches cancel most digits, so the last bit of a.b
+            # shows in their 1 / distance weights.
+            for t in range(kt):
+                best1[t] = np.int32(-2147483648)
+                best2[t] = np.int32(-2147483648)
             for j in range(ks):
                 for t in range(kt):
                     sim[j, t] = 0.0
                 for u in range(d2):
                     a = s_keys[b, j, p, u]
                     for t in range(kt):
-                        sim[j, t] += a * t_keys_t[u, t]
+                        sim[j, t] = fma32(a, t_keys_t[u, t], sim[j, t])
+                # Nearest and second nearest stored slot of every test slot by the similarity's int32 bits with the
+                # low bits replaced by the slot index (as the numpy path: the nearest is exact whenever it is a
+                # match); keys are distinct, so the second is the largest below the first.
+                for t in range(kt):
+                    key = (sim_bits[j, t] & high) | np.int32(j)
+                    b1 = best1[t]
+                    best2[t] = max(best2[t], min(b1, key))
+                    best1[t] = max(b1, key)
             n_ok = 0
             nn = 0.0
             for t in range(kt):
                 if not t_valid[b, t]:
                     continue
-                # Nearest and second nearest stored slot by the similarity's int32 bits with the low bits replaced
-                # by the slot index (as the numpy path: the nearest is exact whenever it is a match).
-                best1 = np.int32(-2147483648)
-                best2 = np.int32(-2147483648)
-                for j in range(ks):
-                    key = (sim_bits[j, t] & high) | np.int32(j)
-                    if key > best1:
-                        best2 = best1
-                        best1 = key
-                    elif key > best2:
-                        best2 = key
-                j1 = best1 & low
-                j2 = best2 & low
+                j1 = best1[t] & low
+                j2 = best2[t] & low
                 s1 = sim[j1, t]
                 if not s1 > np.float32(0.0):
                     continue

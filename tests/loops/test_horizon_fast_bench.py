@@ -10,7 +10,7 @@ import pytest
 from loops.horizon import HorizonParams
 from tests.loops.test_horizon_bands import scene
 from vslam.bench.horizon import publish_sections
-from vslam.bench.horizon_fast import ORB, PairSet, compare, fast_name
+from vslam.bench.horizon_fast import ORB, PairSet, backends, compare, fast_name
 
 
 def small_set() -> PairSet:
@@ -31,14 +31,16 @@ def small_set() -> PairSet:
 def test_compare_puts_every_packed_preset_and_orb_in_one_table():
     presets = {"fast": HorizonParams.preset("fast"), "lone": HorizonParams.preset("lone")}
     text, res = compare(small_set(), presets, {"tuning": 0, "reporting": 1})
-    names = [fast_name(p, n) for n, p in presets.items()]
+    names = [fast_name(p, n, b) for n, p in presets.items() for b in backends()]
     for half in ("tuning", "reporting"):
         for name in names:
             r = res[half][name]
             assert r["auc"] == 1.0                       # the same place, turned, beats two other places
             assert r["strict_us"] == pytest.approx(2 * r["extraction_us"] + r["matching_us"])
         assert res[half][ORB]["pairs"] == res[half][names[0]]["pairs"]
-        assert set(res[half]["orb_over_packed"]) == {"fast", "lone"}
+        assert set(res[half]["orb_over_packed"]) == {f"{n}, {b}" for n in presets for b in backends()}
+        for n in presets:      # the compiled and the numpy path give the same scores, hence the same AUC
+            assert len({res[half][fast_name(presets[n], n, b)]["auc"] for b in backends()}) == 1
     assert res["trivial_call_us"] > 0
     for name in (*names, ORB, "One trivial array call"):
         assert name in text

@@ -1,5 +1,6 @@
 """Packed multi-band 1D SURF (loops.horizon.packed): the same features and scores as extract_bands / match_bands
-with the same parameters, on synthetic scenes and on real frames; the shift consensus; bad input."""
+with the same parameters, on synthetic scenes and on real frames, on both paths (the compiled kernels of
+loops.horizon.packed_jit, and the numpy fallback with numba hidden); the shift consensus; bad input."""
 from __future__ import annotations
 
 import cv2
@@ -7,12 +8,26 @@ import numpy as np
 import pytest
 
 from loops.horizon import HorizonError, HorizonParams, extract_bands, match, match_bands
+from loops.horizon import packed as packed_module
 from loops.horizon.matching import shift_consensus
-from loops.horizon.packed import extract_packed, match_packed, stack_packed
+from loops.horizon.packed import compiled_kernels, extract_packed, match_packed, stack_packed
 from loops.horizon.surf1d import HorizonFeatures
 from tests.loops.test_horizon_bands import scene
 
 FAST = HorizonParams.preset("fast")
+NO_NUMBA = "numba is not installed (pip install 'vslam[fast]'): no compiled path to compare"
+
+
+@pytest.fixture(params=["numpy", "numba"])
+def backend(request, monkeypatch):
+    """A test on each path: the compiled kernels (skipped without numba), and the numpy fallback as it runs on a
+    machine without numba (the kernels hidden, extract_packed / match_packed left on their default)."""
+    if request.param == "numba":
+        if compiled_kernels() is None:
+            pytest.skip(NO_NUMBA)
+    else:
+        monkeypatch.setattr(packed_module, "_JIT", [None])
+    return request.param
 
 
 def same_features(packed, reference: list[HorizonFeatures]) -> None:
@@ -50,7 +65,7 @@ def test_the_cap_keeps_the_strongest_features_of_each_band():
 
 
 @pytest.mark.parametrize("row", [60.0, 30.0, 100.0])   # centred, and bands pushed inside the image at either edge
-def test_packed_extraction_gives_the_reference_features(row):
+def test_packed_extraction_gives_the_reference_features(row, backend):
     for seed in range(3):
         img = scene(seed)
         same_features(extract_packed(img, row, FAST), extract_bands(img, row, FAST))
@@ -58,7 +73,7 @@ def test_packed_extraction_gives_the_reference_features(row):
 
 @pytest.mark.parametrize("over", [{}, {"step": 1}, {"bands": 1, "threshold": 0.0}, {"max_features": 400},
                                   {"sample_mode": "box", "step": 4, "band_height": 30}])
-def test_lone_preset_and_other_settings_give_the_reference_features(over):
+def test_lone_preset_and_other_settings_give_the_reference_features(over, backend):
     # lone: three 16-row bands every 4 columns; max_features 400 exceeds the candidates of a 160-px frame (the
     # slots past them stay empty); box sampling over 4 x 30 pixels no longer fits the 16-bit accumulator.
     p = HorizonParams.preset("lone").replace(**over)
@@ -68,7 +83,7 @@ def test_lone_preset_and_other_settings_give_the_reference_features(over):
 
 
 @pytest.mark.parametrize("preset", ["fast", "lone"])
-def test_wide_frames_with_empty_slots_give_the_reference_features(preset):
+def test_wide_frames_with_empty_slots_give_the_reference_features(preset, backend):
     # 1200 px: the gather path (not the dense product of short signals); 300 slots per band, more than the scene's
     # features, so empty slots must come out all zero there too.
     p = HorizonParams.preset(preset).replace(max_features=300)
@@ -79,24 +94,24 @@ def test_wide_frames_with_empty_slots_give_the_reference_features(preset):
         same_features(packed, extract_bands(img, 60.0, p))
 
 
-def test_a_float_image_gives_the_reference_features():
+def test_a_float_image_gives_the_reference_features(backend):
     img = scene(6).astype(np.float32) / 255.0 * 100.0     # not integers: the float64 path
     p = FAST.replace(threshold=0.1)
     same_features(extract_packed(img, 60.0, p), extract_bands(img, 60.0, p))
 
 
-def test_overlapping_bands_of_a_low_image_give_the_reference_features():
+def test_overlapping_bands_of_a_low_image_give_the_reference_features(backend):
     img = scene(2)[:40]                            # seven 12-row bands overlap inside 40 rows
     same_features(extract_packed(img, 20.0, FAST), extract_bands(img, 20.0, FAST))
 
 
-def test_packed_box_sampling_and_colour_input_give_the_reference_features():
+def test_packed_box_sampling_and_colour_input_give_the_reference_features(backend):
     p = FAST.replace(sample_mode="box", step=3)
     img = cv2.cvtColor(scene(4), cv2.COLOR_GRAY2BGR)
     same_features(extract_packed(img, 60.0, p), extract_bands(img, 60.0, p))
 
 
-def test_packed_matching_gives_the_reference_scores_for_one_view_a_subset_and_all():
+def test_packed_matching_gives_the_reference_scores_for_one_view_a_subset_and_all(backend):
     stored_imgs = [scene(s, shift=4.0) for s in range(5)] + [scene(s + 50) for s in range(3)]
     test_img = scene(2)
     ref_nn, ref_cons = reference_scores(test_img, stored_imgs, 60.0, FAST)
@@ -112,7 +127,7 @@ def test_packed_matching_gives_the_reference_scores_for_one_view_a_subset_and_al
     assert ref_cons[2] > np.delete(ref_cons, 2).max()
 
 
-def test_packed_matching_with_the_geometric_check_off_and_one_view_of_few_features():
+def test_packed_matching_with_the_geometric_check_off_and_one_view_of_few_features(backend):
     flat = np.full((120, 160), 128, np.uint8)            # no features at all: every slot empty
     stored_imgs = [scene(1), flat]
     p = FAST.replace(ransac_min_inliers=5, ratio=0.8)
@@ -125,7 +140,7 @@ def test_packed_matching_with_the_geometric_check_off_and_one_view_of_few_featur
     assert got.score_ransac[0] > 0
 
 
-def test_real_frames_give_the_reference_features_and_scores(shared_data):
+def test_real_frames_give_the_reference_features_and_scores(shared_data, backend):
     c = shared_data / "places" / "corridor"
     names = ["ref/0000010.jpg", "ref/0000050.jpg", "query/0000010.jpg", "query/0000011.jpg", "query/0000090.jpg"]
     imgs = [cv2.imread(str(c / n), cv2.IMREAD_GRAYSCALE) for n in names]
@@ -173,7 +188,7 @@ def test_shift_consensus_in_match_reports_the_turn():
     assert r.n_inliers >= p.ransac_min_inliers
 
 
-def test_bad_input_raises_horizon_errors():
+def test_bad_input_raises_horizon_errors(backend):
     img = scene(0)
     with pytest.raises(HorizonError, match="max_features"):
         extract_packed(img, 60.0, FAST.replace(max_features=0))
@@ -191,3 +206,54 @@ def test_bad_input_raises_horizon_errors():
     with pytest.raises(HorizonError, match="different bands"):
         match_packed(extract_packed(img, 60.0, FAST.replace(max_features=8)), db, FAST)
     assert match_packed(extract_packed(img, 60.0, FAST), db, FAST, which=np.zeros(0, int)).score.shape == (0,)
+    if backend == "numba":       # the kernel checks its indices (it has no bounds checks of its own)
+        with pytest.raises(HorizonError, match="outside the 1 stored views"):
+            match_packed(extract_packed(img, 60.0, FAST), db, FAST, which=np.array([0, 1]))
+
+
+def _real_or_scenes(shared_data) -> list[np.ndarray]:
+    names = ["ref/0000010.jpg", "ref/0000050.jpg", "query/0000010.jpg", "query/0000011.jpg", "query/0000090.jpg",
+             "ref/0000120.jpg", "query/0000121.jpg"]
+    imgs = [cv2.imread(str(shared_data / "places" / "corridor" / n), cv2.IMREAD_GRAYSCALE) for n in names]
+    return [i for i in imgs if i is not None]
+
+
+@pytest.mark.parametrize("preset", ["fast", "lone"])
+def test_the_compiled_and_the_numpy_path_give_the_same_features_and_scores(shared_data, preset):
+    if compiled_kernels() is None:
+        pytest.skip(NO_NUMBA)
+    p = HorizonParams.preset(preset)
+    imgs = _real_or_scenes(shared_data) + [scene(s) for s in range(4)] + [scene(1, shift=5.0)]
+    if len(imgs) < 10:
+        pytest.skip("corridor frames not readable")
+    views = {}
+    for compiled in (True, False):
+        views[compiled] = [extract_packed(i, 60.0, p, compiled=compiled) for i in imgs]
+    for a, b in zip(views[True], views[False]):
+        np.testing.assert_array_equal(a.x, b.x)            # the same features in the same slots
+        np.testing.assert_array_equal(a.valid, b.valid)
+        np.testing.assert_allclose(a.keys, b.keys, rtol=0, atol=1e-6)
+        assert a.width == b.width
+    db = stack_packed(views[False])
+    which = np.array([3, 0, 5, -1, 2])
+    for t in views[False]:
+        got = match_packed(t, db, p, which, compiled=True)
+        want = match_packed(t, db, p, which, compiled=False)
+        assert got.score.dtype == want.score.dtype and got.score_ransac.dtype == want.score_ransac.dtype
+        np.testing.assert_allclose(got.score, want.score, rtol=1e-5)
+        np.testing.assert_allclose(got.score_ransac, want.score_ransac, rtol=1e-5)
+        every = match_packed(t, db, p, compiled=True)
+        np.testing.assert_allclose(every.score_ransac, match_packed(t, db, p, compiled=False).score_ransac, rtol=1e-5)
+    assert (got.score_ransac > 0).any()                      # the scores compared are not all zero
+
+
+def test_without_numba_the_numpy_path_runs_and_asking_for_the_compiled_one_is_an_error(monkeypatch):
+    monkeypatch.setattr(packed_module, "_JIT", [None])       # as on a machine without numba
+    img = scene(0)
+    f = extract_packed(img, 60.0, FAST)
+    assert f.valid.any()
+    with pytest.raises(HorizonError, match="numba"):
+        extract_packed(img, 60.0, FAST, compiled=True)
+    with pytest.raises(HorizonError, match="numba"):
+        match_packed(f, stack_packed([f, f]), FAST, compiled=True)
+    assert match_packed(f, stack_packed([f, f]), FAST).score_ransac[0] > 0

@@ -1,5 +1,6 @@
 """Packed 1D SURF (`loops.horizon.packed`, presets `fast` and `lone`) against full-image ORB + RANSAC, accuracy and
-time, on the same frames in the same run.
+time, on the same frames in the same run; each preset twice, compiled (numba, when installed) and with the numpy
+fallback.
 
 How the time is compared (all methods, same images, same pairs, same process, one thread each: OpenCV
 single-threaded, BLAS single-threaded by the CLI; thread CPU time, so that time spent waiting for other
@@ -31,13 +32,14 @@ import numpy as np
 
 from loops.curves import auc
 from loops.horizon import HorizonParams
-from loops.horizon.packed import extract_packed, match_packed, stack_packed
+from loops.horizon.packed import compiled_kernels, extract_packed, match_packed, stack_packed
 from vslam.bench.horizon_real import OrbRansac
 from vslam.evaluation.tables import format_table
 
 ORB = "ORB(1000) + RANSAC, native size"
-EXTRACT_CALLS = 33   # array operations in one extract_packed (loops/horizon/packed.py, COLUMN sampling, step > 1)
-MATCH_CALLS = 60     # array operations in one match_packed call with `which` (whatever the number of views)
+EXTRACT_CALLS = 33   # array operations in one numpy extract_packed (loops/horizon/packed.py, COLUMN sampling, step > 1)
+MATCH_CALLS = 60     # array operations in one numpy match_packed call with `which` (whatever the number of views)
+NUMBA, NUMPY = "numba", "numpy"
 BLOCK = 16   # images or test views per block: the methods take turns block by block
 
 
@@ -61,11 +63,32 @@ class _Measured:
     all_us: dict[str, dict[str, float]]            # packed method -> test image -> us / pair against every view
     stack_us: dict[str, float]                     # packed method -> building the stored set, us per stored view
     call_us: float                                 # one trivial array call (the per-call floor), median
+    first_ms: dict[str, float]                     # compiled method -> its first (untimed) call, wall ms
 
 
-def fast_name(params: HorizonParams, preset: str = "fast") -> str:
-    return (f"1D SURF packed, preset {preset} ({params.bands} bands, {params.max_features} features / band, "
-            f"step {params.step}, shift consensus)")
+def fast_name(params: HorizonParams, preset: str = "fast", backend: str = NUMPY) -> str:
+    return (f"1D SURF packed, preset {preset}, {backend} ({params.bands} bands, {params.max_features} features / "
+            f"band, step {params.step}, shift consensus)")
+
+
+def backends() -> list[str]:
+    """The packed backends this machine can run: numba (the compiled kernels) when installed, and numpy."""
+    return [NUMBA, NUMPY] if compiled_kernels() is not None else [NUMPY]
+
+
+def _warm_up(ps: PairSet, packed: dict[str, tuple[HorizonParams, bool]]) -> dict[str, float]:
+    """One untimed extraction and matching per compiled method before the measured run (the first call compiles
+    the kernel, or loads it from numba's cache); returns that first call's wall time, ms, per method."""
+    name = next(iter(ps.images))
+    out = {}
+    for method, (params, compiled) in packed.items():
+        if not compiled:
+            continue
+        t0 = time.perf_counter()
+        f = extract_packed(ps.images[name], ps.rows[name], params, compiled=True)
+        match_packed(f, stack_packed([f, f]), params, compiled=True)
+        out[method] = (time.perf_counter() - t0) * 1e3
+    return out
 
 
 def _trivial_calls(clock, n: int = 8, per: int = 16) -> list[float]:
@@ -92,17 +115,20 @@ def _blocks(items: list, size: int = BLOCK) -> list[list]:
     return [items[i:i + size] for i in range(0, len(items), size)]
 
 
-def _measure(ps: PairSet, packed: dict[str, HorizonParams]) -> _Measured:
-    """Every packed method (name -> params) and ORB on the same images and pairs, taking turns block by block."""
+def _measure(ps: PairSet, packed: dict[str, tuple[HorizonParams, bool]]) -> _Measured:
+    """Every packed method (name -> (params, compiled)) and ORB on the same images and pairs, taking turns block by
+    block."""
     cv2.setNumThreads(1)
+    first_ms = _warm_up(ps, packed)
     clock = time.thread_time_ns
     orb = OrbRansac()
     methods = [*packed, ORB]
     feats: dict[str, dict] = {m: {} for m in methods}
     ext: dict[str, dict[str, float]] = {m: {} for m in methods}
     extractors = {ORB: lambda im, row: orb.extract(im)}
-    for name, params in packed.items():
-        extractors[name] = functools.partial(lambda im, row, p: extract_packed(im, row, p), p=params)
+    for name, (params, compiled) in packed.items():
+        extractors[name] = functools.partial(lambda im, row, p, c: extract_packed(im, row, p, compiled=c),
+                                             p=params, c=compiled)
     calls: list[float] = []
     for i, block in enumerate(_blocks(list(ps.images))):
         calls += _trivial_calls(clock)
@@ -127,17 +153,17 @@ def _measure(ps: PairSet, packed: dict[str, HorizonParams]) -> _Measured:
     all_us: dict[str, dict[str, float]] = {m: {} for m in packed}
 
     def packed_block(method: str, block: list[str]) -> None:
-        params, db = packed[method], dbs[method]
+        (params, compiled), db = packed[method], dbs[method]
         for b in block:
             idx = groups[b]
             which = np.array([col[ps.pairs[p][0]] for p in idx])
             t0 = clock()
-            r = match_packed(feats[method][b], db, params, which)
+            r = match_packed(feats[method][b], db, params, which, compiled=compiled)
             t = (clock() - t0) / 1e3
             scores[method][idx] = r.score_ransac
             match_us[method][idx] = t / len(idx)
             t0 = clock()
-            match_packed(feats[method][b], db, params)
+            match_packed(feats[method][b], db, params, compiled=compiled)
             all_us[method][b] = (clock() - t0) / 1e3 / len(stored_names)
 
     def orb_block(block: list[str]) -> None:
@@ -150,7 +176,7 @@ def _measure(ps: PairSet, packed: dict[str, HorizonParams]) -> _Measured:
     for i, block in enumerate(_blocks(list(groups))):
         for method in _turns(methods, i):
             orb_block(block) if method == ORB else packed_block(method, block)
-    return _Measured(scores, ext, match_us, all_us, stack_us, float(np.median(calls)))
+    return _Measured(scores, ext, match_us, all_us, stack_us, float(np.median(calls)), first_ms)
 
 
 def _half_figures(ps: PairSet, m: _Measured, method: str, sel: np.ndarray) -> dict:
@@ -169,9 +195,14 @@ def _half_figures(ps: PairSet, m: _Measured, method: str, sel: np.ndarray) -> di
 
 
 def compare(ps: PairSet, packed: dict[str, HorizonParams], halves: dict[str, int | None]) -> tuple[str, dict]:
-    """Table of AUC and per-image / per-pair times of every packed preset (preset name -> params) and ORB on each
-    half (name -> half id, None = all), and each preset's time ratios to ORB's."""
-    named = {fast_name(p, preset): p for preset, p in packed.items()}
+    """Table of AUC and per-image / per-pair times of every packed preset (preset name -> params), on each backend
+    (numba and numpy, or numpy alone without numba), and ORB on each half (name -> half id, None = all), and each
+    preset's time ratios to ORB's (keys "preset, backend")."""
+    named, label = {}, {}
+    for preset, p in packed.items():
+        for backend in backends():
+            named[fast_name(p, preset, backend)] = (p, backend == NUMBA)
+            label[fast_name(p, preset, backend)] = f"{preset}, {backend}"
     m = _measure(ps, named)
     res: dict[str, dict] = {}
     rows, ratio_rows = [], []
@@ -184,18 +215,24 @@ def compare(ps: PairSet, packed: dict[str, HorizonParams], halves: dict[str, int
             r = res[half_name][meth]
             rows.append([half_name, meth, r["pairs"], r["auc"], *(r[c] for c in cols)])
         res[half_name]["orb_over_packed"] = {}
-        for preset, meth in zip(packed, named):
+        for meth in named:
             f = res[half_name][meth]
-            ratio_rows.append([half_name, preset, f["auc"] - o["auc"], *(o[c] / f[c] for c in cols)])
-            res[half_name]["orb_over_packed"][preset] = {c: o[c] / f[c] for c in cols}
+            ratio_rows.append([half_name, label[meth], f["auc"] - o["auc"], *(o[c] / f[c] for c in cols)])
+            res[half_name]["orb_over_packed"][label[meth]] = {c: o[c] / f[c] for c in cols}
     names = ["extraction / image", "matching / pair (its candidates)", "matching / pair (against every stored view)",
              "per pair, strict (2 extractions + matching)", "per pair, every test x every stored view"]
     table = format_table(["half", "method", "pairs", "AUC", *(f"{n}, us" for n in names)], rows, floatfmt=".3g")
     ratios = format_table(["half", "preset", "AUC, packed - ORB", *(f"ORB / packed, {n}" for n in names)],
                           ratio_rows, floatfmt=".3g")
     res["trivial_call_us"] = m.call_us
+    res["first_call_ms"] = {label[k]: v for k, v in m.first_ms.items()}
     floor = (f"One trivial array call (np.add of two 16-element arrays, timed between the blocks of this run): "
-             f"{m.call_us:.2g} us median. A packed extraction is {EXTRACT_CALLS} array operations, a packed "
-             f"matching call {MATCH_CALLS} (shared by its candidates): at that cost alone a strict pair with about 9 "
-             f"candidates per test view is >= {m.call_us * (2 * EXTRACT_CALLS + MATCH_CALLS / 9):.2g} us.")
+             f"{m.call_us:.2g} us median. A numpy packed extraction is {EXTRACT_CALLS} array operations, a numpy "
+             f"packed matching call {MATCH_CALLS} (shared by its candidates): at that cost alone a strict pair with "
+             f"about 9 candidates per test view is >= {m.call_us * (2 * EXTRACT_CALLS + MATCH_CALLS / 9):.2g} us. "
+             "The numba rows are one compiled call each.")
+    if m.first_ms:
+        floor += (" First compiled call of each preset (extraction + matching, untimed in the table; compiles, or "
+                  "loads numba's cache): " + ", ".join(f"{label[k]} {v:.0f} ms" for k, v in m.first_ms.items())
+                  + ".")
     return f"{table}\n\n{ratios}\n\n{floor}", res
