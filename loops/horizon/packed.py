@@ -190,10 +190,11 @@ class _BandPlan:
 @dataclass(frozen=True)
 class JitPlan:
     """Tables of packed_jit.extract_kernel: per band candidate (separators included: weight 0, look-ups 0) its
-    look-ups in surf1d's own padded integral (surf1d's padding, not the reduced one above), as contiguous arrays."""
+    look-ups in the band's padded integral (padded as far as the fitting candidates reach, as above: the look-ups'
+    coefficients sum to 0, so the values are surf1d's), as contiguous arrays."""
 
     rows: np.ndarray            # (B * band_height,) int64 image rows, band after band
-    geo: np.ndarray             # int64 [n, step, box 0/1, surf1d pad, band_height, sort-key low mask, samples per
+    geo: np.ndarray             # int64 [n, step, box 0/1, pad, band_height, sort-key low mask, samples per
     #                             subregion]
     resp_look: np.ndarray       # (M, 4) int64
     resp_w: np.ndarray          # (M,)
@@ -305,11 +306,11 @@ def _band_plan_cached(height: int, width: int, row: float, params: HorizonParams
     desc_haar[n_look:, -1] = sum_coef                                   # the box-filter sum (its sign: the blob's)
     code = m - 1 - np.arange(n_bands * m) % m
     j_resp = np.zeros((m, 4), np.int64)
-    j_resp[slots] = plan.resp_idx[:, fit].T
+    j_resp[slots] = plan.resp_idx[:, fit].T - delta
     j_desc = np.zeros((m, n_look), np.int64)
-    j_desc[slots] = plan.desc_idx[fit]
+    j_desc[slots] = plan.desc_idx[fit] - delta
     low = (1 << m.bit_length()) - 1
-    jit = JitPlan(rows.astype(np.int64), np.array([n, params.step, int(box), plan.pad, band, low,
+    jit = JitPlan(rows.astype(np.int64), np.array([n, params.step, int(box), pad, band, low,
                                                    params.samples_per_subregion], np.int64),
                   j_resp, resp_w.copy(), j_desc, x.copy(), plan.desc_abs.sum(axis=1))
     # The kernel computes Haar responses as v[s] - 2 v[s+1] + v[s+2] and the signed sums from gauss, sample s in

@@ -49,7 +49,7 @@ def extract_kernel(image, rows, geo, resp_look, resp_w, desc_look, x_cand, gauss
 
     The band's signal, its padded integral and the box-filter sums are float64: exact for integer pixel values.
     rows: (B * band_height,) image rows, band after band. geo: int64 [n samples, step, box sampling 0/1, pad,
-    band_height, low, samples per subregion]: signal length, columns per sample, sampling mode, surf1d's integral
+    band_height, low, samples per subregion]: signal length, columns per sample, sampling mode, the integral's
     padding, rows per band, the sort key's low-bit mask, descriptor samples per subregion. Per candidate j of a band (M, separators included, with weight 0 and look-ups 0):
     resp_look (M, 4) look-ups of its box filter in the padded integral, resp_w (M,) response weight, desc_look
     (M, S + 2) descriptor look-ups, x_cand (M,) image column. gauss (S,): the Gaussian weight of each descriptor
@@ -85,7 +85,7 @@ def extract_kernel(image, rows, geo, resp_look, resp_w, desc_look, x_cand, gauss
                 sig[i] = acc
             else:
                 sig[i] = colsum[i * step]
-        # surf1d's padded integral: the ends replicated pad samples out, a leading 0.
+        # The padded integral (surf1d's, less padding): the ends replicated pad samples out, a leading 0.
         acc = 0.0
         for t in range(pad):
             acc += sig[0]
