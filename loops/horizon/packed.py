@@ -22,6 +22,7 @@ import functools
 import importlib
 import importlib.util
 import math
+import os
 from dataclasses import dataclass
 from types import ModuleType
 
@@ -102,16 +103,19 @@ class PackedMatch:
 
 
 # The compiled kernels (loops.horizon.packed_jit, numba: the optional extra `fast`) are loaded on first use, not
-# at import: importing numba costs about 0.3 s, which a process that never extracts a packed view should not pay.
-# Without numba (or with a numba that fails to import) the numpy code below is used; both give the same features.
+# at import: importing numba and loading the first kernel cost about 1.7 s per process, which a process that never
+# extracts a packed view should not pay. Without numba (or with a numba that fails to import, or with
+# VSLAM_NUMBA=0: a short command on a few hundred frames is quicker without that start-up cost) the numpy code
+# below is used; both give the same features.
+NUMBA_ENV = "VSLAM_NUMBA"
 _JIT: list = []     # [] not tried yet; [module] or [None] once tried
 
 
 def compiled_kernels() -> ModuleType | None:
-    """The compiled kernels module, or None when numba is not installed or does not import."""
+    """The compiled kernels module, or None when numba is not installed, does not import, or VSLAM_NUMBA is 0."""
     if not _JIT:
         mod = None
-        if importlib.util.find_spec("numba") is not None:
+        if os.environ.get(NUMBA_ENV, "").strip() != "0" and importlib.util.find_spec("numba") is not None:
             try:
                 mod = importlib.import_module("loops.horizon.packed_jit")
             except ImportError:
@@ -125,7 +129,7 @@ def _use_compiled(compiled: bool | None) -> ModuleType | None:
         return None
     mod = compiled_kernels()
     if mod is None and compiled:
-        raise HorizonError("the compiled packed path needs numba: pip install 'vslam[fast]' (or numba)")
+        raise HorizonError(f"the compiled packed path needs numba (pip install 'vslam[fast]') and {NUMBA_ENV} not 0")
     return mod
 
 

@@ -3,6 +3,9 @@ with the same parameters, on synthetic scenes and on real frames, on both paths 
 loops.horizon.packed_jit, and the numpy fallback with numba hidden); the shift consensus; bad input."""
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -13,6 +16,11 @@ from loops.horizon.matching import shift_consensus
 from loops.horizon.packed import compiled_kernels, extract_packed, match_packed, stack_packed
 from loops.horizon.surf1d import HorizonFeatures
 from tests.loops.test_horizon_bands import scene
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:       # Python 3.10: the tomli backport, a core dependency there
+    import tomli as tomllib
 
 FAST = HorizonParams.preset("fast")
 NO_NUMBA = "numba is not installed (pip install 'vslam[fast]'): no compiled path to compare"
@@ -257,3 +265,19 @@ def test_without_numba_the_numpy_path_runs_and_asking_for_the_compiled_one_is_an
     with pytest.raises(HorizonError, match="numba"):
         match_packed(f, stack_packed([f, f]), FAST, compiled=True)
     assert match_packed(f, stack_packed([f, f]), FAST).score_ransac[0] > 0
+
+
+def test_the_test_extra_installs_numba_so_ci_compares_both_paths():
+    # CI (.ci/run) installs ".[test]" and runs the README's command: numba must be in that extra, or the comparison
+    # tests above would skip there too.
+    extras = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    for extra in ("test", "fast", "bench"):
+        assert any(r.split(">")[0].split("=")[0].strip() == "numba" for r in extras[extra]), extra
+
+
+def test_vslam_numba_0_turns_the_compiled_path_off(monkeypatch):
+    monkeypatch.setattr(packed_module, "_JIT", [])           # not loaded yet in this "process"
+    monkeypatch.setenv("VSLAM_NUMBA", "0")
+    assert compiled_kernels() is None
+    with pytest.raises(HorizonError, match="VSLAM_NUMBA"):
+        extract_packed(scene(0), 60.0, FAST, compiled=True)
