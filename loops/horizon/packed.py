@@ -15,6 +15,10 @@ of a query by the same calls, so the cost per band and per pair is the arithmeti
 
 The results are those of `extract_bands` / `match_bands` with the same parameters and `Consensus.SHIFT` (the
 tests check it on real frames); the RANSAC line has no batched form here. Requires `params.max_features` > 0.
+
+With numba installed (the extra `fast`) extraction and matching each run as one compiled call
+(loops.horizon.packed_jit) on tables built here with the numpy path's; the numpy code below is the fallback and
+gives the same features (`compiled=` on each function forces either; VSLAM_NUMBA=0 turns the kernels off).
 """
 from __future__ import annotations
 

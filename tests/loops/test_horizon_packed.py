@@ -90,7 +90,7 @@ def test_lone_preset_and_other_settings_give_the_reference_features(over, backen
         same_features(extract_packed(img, 60.0, p), extract_bands(img, 60.0, p))
 
 
-@pytest.mark.parametrize("preset", ["fast", "lone"])
+@pytest.mark.parametrize("preset", ["fast", "lone", "lone_compiled"])
 def test_wide_frames_with_empty_slots_give_the_reference_features(preset, backend):
     # 1200 px: the gather path (not the dense product of short signals); 300 slots per band, more than the scene's
     # features, so empty slots must come out all zero there too.
@@ -226,7 +226,7 @@ def _real_or_scenes(shared_data) -> list[np.ndarray]:
     return [i for i in imgs if i is not None]
 
 
-@pytest.mark.parametrize("preset", ["fast", "lone"])
+@pytest.mark.parametrize("preset", ["fast", "lone", "lone_compiled"])
 def test_the_compiled_and_the_numpy_path_give_the_same_features_and_scores(shared_data, preset):
     if compiled_kernels() is None:
         pytest.skip(NO_NUMBA)

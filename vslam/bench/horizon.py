@@ -151,9 +151,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fast-preset", default="fast",
                         help="HorizonParams preset of the packed 1D SURF compared with ORB + RANSAC per image and "
                              "per pair (default: %(default)s)")
-    parser.add_argument("--lone-preset", default="lone",
-                        help="a second packed preset in the same comparison, the lightest for a lone pair; '' for none "
-                             "(default: %(default)s)")
+    parser.add_argument("--lone-preset", default="lone,lone_compiled",
+                        help="more packed presets in the same comparison (comma-separated), those for a lone pair; "
+                             "'' for none (default: %(default)s)")
     parser.add_argument("--threads", type=int, default=1,
                         help="OpenCV threads for SIFT; 1 compares single core with single core (default: 1)")
 
@@ -315,7 +315,7 @@ def _real(args: argparse.Namespace, data_dir: Path) -> tuple[str, dict]:
     bank = build_real_bank(data_dir)
     fast_table, fast_res = compare(PairSet(bank.images, bank.rows, bank.pairs, bank.labels, bank.half),
                                    _packed_presets(args), {"tuning": 0, "reporting": 1})
-    head = (f"Packed 1D SURF (presets {' and '.join(_packed_presets(args))}) against ORB + RANSAC on the same real "
+    head = (f"Packed 1D SURF (presets {', '.join(_packed_presets(args))}) against ORB + RANSAC on the same real "
             f"pairs, thread CPU time, the methods taking turns every 16 images / test views (definitions in "
             f"vslam/bench/horizon_fast.py and docs/benchmarks.md).")
     print(f"{head}\n\n{fast_table}", flush=True)
@@ -324,7 +324,7 @@ def _real(args: argparse.Namespace, data_dir: Path) -> tuple[str, dict]:
 
 
 def _packed_presets(args: argparse.Namespace) -> dict[str, HorizonParams]:
-    names = [args.fast_preset] + ([args.lone_preset] if args.lone_preset else [])
+    names = [args.fast_preset] + [n.strip() for n in args.lone_preset.split(",") if n.strip()]
     return {n: HorizonParams.preset(n) for n in dict.fromkeys(names)}
 
 
@@ -336,7 +336,7 @@ def _crop_bank_fast(args: argparse.Namespace, bank: Bank) -> tuple[str, dict]:
     ps = PairSet(dict(zip(names, crops)), {n: float(v.row) for n, v in zip(names, bank.views)},
                  [(names[a], names[b]) for a, b in bank.pairs], bank.labels, np.zeros(len(bank.pairs), int))
     table, res = compare(ps, _packed_presets(args), {"crop bank (all; nothing tuned here)": None})
-    text = (f"Packed 1D SURF (presets {' and '.join(_packed_presets(args))}) against ORB + RANSAC on the crop bank "
+    text = (f"Packed 1D SURF (presets {', '.join(_packed_presets(args))}) against ORB + RANSAC on the crop bank "
             f"above.\n\n{table}")
     print(text, flush=True)
     return text, res
