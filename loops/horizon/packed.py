@@ -27,6 +27,7 @@ import importlib
 import importlib.util
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from types import ModuleType
 
@@ -122,7 +123,9 @@ def compiled_kernels() -> ModuleType | None:
         if os.environ.get(NUMBA_ENV, "").strip() != "0" and importlib.util.find_spec("numba") is not None:
             try:
                 mod = importlib.import_module("loops.horizon.packed_jit")
-            except ImportError:
+            except (ImportError, RuntimeError) as exc:     # a broken numba; no writable cache directory
+                warnings.warn(f"compiled 1D SURF kernels unavailable ({exc}); the numpy code runs instead",
+                              RuntimeWarning, stacklevel=3)
                 mod = None
         _JIT.append(mod)
     return _JIT[0]

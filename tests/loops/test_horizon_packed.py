@@ -281,3 +281,17 @@ def test_vslam_numba_0_turns_the_compiled_path_off(monkeypatch):
     assert compiled_kernels() is None
     with pytest.raises(HorizonError, match="VSLAM_NUMBA"):
         extract_packed(scene(0), 60.0, FAST, compiled=True)
+
+
+def test_a_numba_that_cannot_load_falls_back_to_numpy_with_a_warning(monkeypatch):
+    # e.g. numba present but broken, or no writable cache directory for cache=True (numba raises RuntimeError)
+    def broken(name):
+        raise RuntimeError("cannot cache function 'extract_kernel': no locator available")
+
+    monkeypatch.setattr(packed_module, "_JIT", [])
+    monkeypatch.delenv("VSLAM_NUMBA", raising=False)
+    monkeypatch.setattr(packed_module.importlib.util, "find_spec", lambda name: object())
+    monkeypatch.setattr(packed_module.importlib, "import_module", broken)
+    with pytest.warns(RuntimeWarning, match="numpy code runs instead"):
+        f = extract_packed(scene(0), 60.0, FAST)
+    assert f.valid.any() and compiled_kernels() is None
