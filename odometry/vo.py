@@ -234,6 +234,11 @@ class VOConfig(Config):
     height_noise_spread: float = setting(1.0, range="[0, inf)", unit="x chain variance",
                                          doc="share of the chained height variance taken as noise in the graded "
                                              "estimate's prior")
+    # before the height window is full, the graded estimate's anchor is partly the nominal camera_height, which
+    # describes the first frame only as well as the height was measured: 0.2 % is 1 mm at 0.5 m (a rule at rest)
+    height_start_sigma: float = setting(0.002, range="[0, inf)", unit="relative (log height)",
+                                        doc="standard deviation of the first frame's height about camera_height "
+                                            "(the graded height estimate's start)")
     # LK fixes a window's position only across its edges (the aperture problem): on planks, grain and brick
     # courses many windows are edge-like, and their error along the edge enters the refined motion and height
     # off by default: it lowers render_floor's reporting rows (wood planks + brick most) but raises its two tuning
@@ -368,7 +373,8 @@ class VisualOdometry:
         self._frame_height = self._height
         self._tensor_cache: tuple[_Images, np.ndarray] | None = None  # structure tensors of the last template
         self.heights = HeightTracker(camera.camera_height, self.config.height_window, self.config.height_significance,
-                                     self.config.height_graded, self.config.height_noise_spread)
+                                     self.config.height_graded, self.config.height_noise_spread,
+                                     self.config.height_start_sigma)
 
     # ------------------------------------------------------------------ public state
     @property
