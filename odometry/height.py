@@ -11,14 +11,20 @@ observable from images, and the chain's errors add up like a random walk. So:
   unevenness or an altitude hold average out over that time): the departure of a frame is
   d = log_rel - mean(log_rel over the window);
 - how much of d is used (`graded`, the default of the VO): the posterior mean under a zero-mean prior on the
-  departure, d * S^2 / (S^2 + sigma_d^2). sigma_d^2 is what d is off by: the chain's random walk measured from its
-  window mean (a random walk of variance V over the window strays from its own window mean by V / 3, not V; before
-  the window is full, by V (1 - f + f^2 / 3) with f the window's filled share) plus, before the window is full,
-  the uncertainty of the anchor's missing share: (1 - f)^2 `start_sigma`^2, the first frame's own departure from
-  the nominal height (what the nominal camera_height is known to). S^2 is the spread the heights really have about
-  the nominal level (their second moment about the anchor over the window, less what the chain's random walk alone
-  may make: `noise_spread` times its variance V over the window). A camera whose height does not vary keeps (close
-  to) the nominal height, one that bounces or climbs gets it followed as far as it is measured;
+  departure, d * S^2 / (S^2 + sigma_d^2), with sigma_d^2 the variance the chain accumulated over the window (the
+  links' own variances, from the refinement) plus, before the window is full, the uncertainty of the anchor (its
+  missing share times the spread of the heights seen so far: the first frame's own departure is not known), and
+  S^2 the spread the heights really have over the window (their spread less what the chain's random walk alone
+  may make: `noise_spread` times its variance V over the window). A camera whose height does not vary keeps
+  (close to) the nominal height, one that bounces or climbs gets it followed as far as it is measured.
+  Two options (off by default: each made our simulator's runs worse, see docs/odometry.md item 10):
+  `random_walk_sigma` counts in sigma_d^2 only what a random walk of variance V strays from its own window mean
+  (V / 3 once the window is full, V (1 - f + f^2 / 3) at a filled share f), which is exact when the links'
+  variances are honest (the independent renderer: link NEES ~1) and too little when they are too small (our
+  simulator: ~4x); `start_sigma` gives the anchor's missing share the first frame's own uncertainty about the
+  nominal height ((1 - f)^2 start_sigma^2) instead of the spread seen so far, and S^2 becomes the heights' second
+  moment about the anchor (the spread of a short stretch about its own mean hides how far it is from the nominal
+  level);
 - or, without `graded`, a hard switch: d is used only when |d| > `significance` * sigma_d, else the keyframe is
   put at the nominal height. It throws away real departures below the threshold (up to ~0.6 % on a planks floor
   whose links are poorly measured in turns) and uses the noisy ones above it in full.
@@ -57,7 +63,8 @@ class HeightTracker:
     """
 
     def __init__(self, nominal: float, window: float, significance: float, graded: bool = False,
-                 noise_spread: float = 1.0, start_sigma: float = 0.002) -> None:
+                 noise_spread: float = 1.0, random_walk_sigma: bool = False,
+                 start_sigma: float | None = None) -> None:
         self.nominal = float(nominal)
         self.window = float(window)
         self.significance = float(significance)
@@ -66,9 +73,10 @@ class HeightTracker:
         # variance V spreads about its mean by V / 6 on average, but the links' own variances can be too small
         # (NEES ~4 on our simulator, whose tilt wobble couples to the height), so all of V by default
         self.noise_spread = float(noise_spread)
+        self.random_walk_sigma = bool(random_walk_sigma)
         # relative standard deviation of the first frame's height about the nominal one (the graded estimate's
-        # anchor before the window is full)
-        self.start_sigma = float(start_sigma)
+        # anchor before the window is full); None: the spread of the heights seen so far
+        self.start_sigma = None if start_sigma is None else float(start_sigma)
         self._frames: deque[tuple[float, float, float]] = deque()  # (t, log_rel, variance)
         self._sum = 0.0
         self._sum2 = 0.0
@@ -119,12 +127,16 @@ class HeightTracker:
     def _graded_terms(self, height: Height) -> tuple[float, float, float]:
         """(d, sigma_d^2, S^2) of the graded estimate (see the module docstring)."""
         full, mean, spread2, chain = self._window(height)
-        # d = chain now - f * window mean: its random-walk error, measured from the window mean, and what the
-        # anchor's missing share (the first frame's departure) may be off by
-        var = (1.0 - full + full * full / 3.0) * chain + ((1.0 - full) * self.start_sigma) ** 2
-        # the heights' spread about the nominal level (the anchor), not about their own mean: before the window is
-        # full the mean of a short stretch sits near its heights and hides how far they are from the nominal one
-        second = spread2 + ((1.0 - full) * mean) ** 2
+        # d = chain now - f * window mean: the chain's error (all of V, or what a random walk strays from its window
+        # mean), and what the anchor's missing share (the first frame's departure) may be off by
+        noise = (1.0 - full + full * full / 3.0) * chain if self.random_walk_sigma else chain
+        if self.start_sigma is None:
+            var = noise + (1.0 - full) ** 2 * spread2
+            second = spread2
+        else:
+            var = noise + ((1.0 - full) * self.start_sigma) ** 2
+            # the heights' spread about the nominal level (the anchor), not about their own mean
+            second = spread2 + ((1.0 - full) * mean) ** 2
         signal = max(second - self.noise_spread * chain, 0.0)
         return height.log_rel - full * mean, var, signal
 
@@ -133,8 +145,12 @@ class HeightTracker:
         posterior mean of the frame's log height over the nominal one, under a zero-mean prior of variance S^2."""
         if len(self._frames) <= 1:
             return 0.0
-        d, var, signal = self._graded_terms(height)
-        if signal <= 0.0:
+        if not self.random_walk_sigma and self.start_sigma is None:
+            d, sigma, signal = self._departure(height)   # the default, as it always was computed
+            var = sigma * sigma
+        else:
+            d, var, signal = self._graded_terms(height)
+        if signal <= 0.0 or not math.isfinite(var):
             return 0.0
         return d * signal / (signal + var)
 
