@@ -16,7 +16,15 @@ observable from images, and the chain's errors add up like a random walk. So:
   missing share times the spread of the heights seen so far: the first frame's own departure is not known), and
   S^2 the spread the heights really have over the window (their spread less what the chain's random walk alone
   may make: `noise_spread` times its variance V over the window). A camera whose height does not vary keeps
-  (close to) the nominal height, one that bounces or climbs gets it followed as far as it is measured;
+  (close to) the nominal height, one that bounces or climbs gets it followed as far as it is measured.
+  Two options (off by default: each made our simulator's runs worse, see docs/odometry.md item 10):
+  `random_walk_sigma` counts in sigma_d^2 only what a random walk of variance V strays from its own window mean
+  (V / 3 once the window is full, V (1 - f + f^2 / 3) at a filled share f), which is exact when the links'
+  variances are honest (the independent renderer: link NEES ~1) and too little when they are too small (our
+  simulator: ~4x); `start_sigma` gives the anchor's missing share the first frame's own uncertainty about the
+  nominal height ((1 - f)^2 start_sigma^2) instead of the spread seen so far, and S^2 becomes the heights' second
+  moment about the anchor (the spread of a short stretch about its own mean hides how far it is from the nominal
+  level);
 - or, without `graded`, a hard switch: d is used only when |d| > `significance` * sigma_d, else the keyframe is
   put at the nominal height. It throws away real departures below the threshold (up to ~0.6 % on a planks floor
   whose links are poorly measured in turns) and uses the noisy ones above it in full.
@@ -55,7 +63,8 @@ class HeightTracker:
     """
 
     def __init__(self, nominal: float, window: float, significance: float, graded: bool = False,
-                 noise_spread: float = 1.0) -> None:
+                 noise_spread: float = 1.0, random_walk_sigma: bool = False,
+                 start_sigma: float | None = None) -> None:
         self.nominal = float(nominal)
         self.window = float(window)
         self.significance = float(significance)
@@ -64,6 +73,10 @@ class HeightTracker:
         # variance V spreads about its mean by V / 6 on average, but the links' own variances can be too small
         # (NEES ~4 on our simulator, whose tilt wobble couples to the height), so all of V by default
         self.noise_spread = float(noise_spread)
+        self.random_walk_sigma = bool(random_walk_sigma)
+        # relative standard deviation of the first frame's height about the nominal one (the graded estimate's
+        # anchor before the window is full); None: the spread of the heights seen so far
+        self.start_sigma = None if start_sigma is None else float(start_sigma)
         self._frames: deque[tuple[float, float, float]] = deque()  # (t, log_rel, variance)
         self._sum = 0.0
         self._sum2 = 0.0
@@ -89,34 +102,57 @@ class HeightTracker:
         return self._departure(height)[:2]
 
     def _departure(self, height: Height) -> tuple[float, float, float]:
-        """(d, sigma_d, S^2): the departure, its standard deviation, and the variance of the real heights over the
-        window (the prior of the graded estimate)."""
+        """(d, sigma_d, S^2) of the significance switch: the departure, its standard deviation (the chain's variance
+        over the window plus the anchor's missing share times the heights' spread so far), and the heights' spread
+        over the window less the chain's noise."""
         if not self._frames:
             return 0.0, math.inf, 0.0
+        full, mean, spread2, chain = self._window(height)
+        var = chain + (1.0 - full) ** 2 * spread2
+        signal = max(spread2 - self.noise_spread * chain, 0.0)
+        return height.log_rel - full * mean, math.sqrt(var), signal
+
+    def _window(self, height: Height) -> tuple[float, float, float, float]:
+        """(f, mean, spread^2, V): the filled share of the window, the mean and spread of its chained log heights,
+        and the variance the chain accumulated over it up to `height`."""
         # before the window is full its mean is a poor estimate of the nominal level: the prior (the first frame's
         # departure is unknown and zero-mean, so the first frame is at the nominal height) keeps the missing share
         full = min(1.0, (self._frames[-1][0] - self._first_t) / self.window)
         n = len(self._frames)
         mean = self._sum / n
-        # the chain's own noise over the window, and what the missing share of the anchor may be off by: the
-        # first frame's departure, as large as the heights seen so far vary
         spread2 = max(self._sum2 / n - mean * mean, 0.0)
         chain = max(height.variance - self._frames[0][2], 0.0)
-        var = chain + (1.0 - full) ** 2 * spread2
-        # the spread the heights really have: what the window's heights spread, less what the chain's random walk
-        # alone may spread them by (`noise_spread` V; see __init__)
-        signal = max(spread2 - self.noise_spread * chain, 0.0)
-        return height.log_rel - full * mean, math.sqrt(var), signal
+        return full, mean, spread2, chain
+
+    def _graded_terms(self, height: Height) -> tuple[float, float, float]:
+        """(d, sigma_d^2, S^2) of the graded estimate (see the module docstring)."""
+        full, mean, spread2, chain = self._window(height)
+        # d = chain now - f * window mean: the chain's error (all of V, or what a random walk strays from its window
+        # mean), and what the anchor's missing share (the first frame's departure) may be off by
+        noise = (1.0 - full + full * full / 3.0) * chain if self.random_walk_sigma else chain
+        if self.start_sigma is None:
+            var = noise + (1.0 - full) ** 2 * spread2
+            second = spread2
+        else:
+            var = noise + ((1.0 - full) * self.start_sigma) ** 2
+            # the heights' spread about the nominal level (the anchor), not about their own mean
+            second = spread2 + ((1.0 - full) * mean) ** 2
+        signal = max(second - self.noise_spread * chain, 0.0)
+        return height.log_rel - full * mean, var, signal
 
     def graded_departure(self, height: Height) -> float:
         """The departure shrunk toward the nominal height by inverse variances, d * S^2 / (S^2 + sigma_d^2): the
         posterior mean of the frame's log height over the nominal one, under a zero-mean prior of variance S^2."""
         if len(self._frames) <= 1:
             return 0.0
-        d, sigma, signal = self._departure(height)
-        if not math.isfinite(sigma) or signal <= 0.0:
+        if not self.random_walk_sigma and self.start_sigma is None:
+            d, sigma, signal = self._departure(height)   # the default, as it always was computed
+            var = sigma * sigma
+        else:
+            d, var, signal = self._graded_terms(height)
+        if signal <= 0.0 or not math.isfinite(var):
             return 0.0
-        return d * signal / (signal + sigma * sigma)
+        return d * signal / (signal + var)
 
     def anchor(self, height: Height) -> Height:
         """The height a new keyframe started by this frame is given: the graded departure from the nominal height

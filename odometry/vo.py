@@ -234,6 +234,17 @@ class VOConfig(Config):
     height_noise_spread: float = setting(1.0, range="[0, inf)", unit="x chain variance",
                                          doc="share of the chained height variance taken as noise in the graded "
                                              "estimate's prior")
+    # two options of the graded estimate (odometry.height), off by default: on the independent renderer (honest
+    # link variances) they lower the 30 fps drift, on our simulator (link variances ~4x too small) they raise it
+    # (docs/odometry.md item 10). random_walk_sigma: sigma_d^2 is what the chain's random walk strays from its
+    # window mean (V / 3), not all of V
+    height_random_walk_sigma: bool = setting(False, doc="graded height: count only the chain's random-walk scatter "
+                                                        "about its window mean as the departure's noise")
+    # height_start_sigma: before the window is full, the first frame's own uncertainty about camera_height (0.002
+    # is 1 mm at 0.5 m, a rule at rest) instead of the spread of the heights seen so far
+    height_start_sigma: float | None = setting(None, range="[0, inf)", unit="relative (log height)",
+                                               doc="graded height: the first frame's standard deviation about "
+                                                   "camera_height (None: the heights' spread so far)")
     # LK fixes a window's position only across its edges (the aperture problem): on planks, grain and brick
     # courses many windows are edge-like, and their error along the edge enters the refined motion and height
     # off by default: it lowers render_floor's reporting rows (wood planks + brick most) but raises its two tuning
@@ -368,7 +379,8 @@ class VisualOdometry:
         self._frame_height = self._height
         self._tensor_cache: tuple[_Images, np.ndarray] | None = None  # structure tensors of the last template
         self.heights = HeightTracker(camera.camera_height, self.config.height_window, self.config.height_significance,
-                                     self.config.height_graded, self.config.height_noise_spread)
+                                     self.config.height_graded, self.config.height_noise_spread,
+                                     self.config.height_random_walk_sigma, self.config.height_start_sigma)
 
     # ------------------------------------------------------------------ public state
     @property
