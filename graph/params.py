@@ -219,6 +219,15 @@ class RobustParams(Config):
     consensus_inner_iterations: int = setting(2, range="[1, inf)", unit="LM iterations",
                                               doc="warm-started LM iterations per GNC outer step (consensus mode); "
                                                   "also caps the least-squares solve of the supported-loop start")
+    # h14-quality2: the final polish (graph.polish) once the loop set is decided
+    polish_max_steps: int = setting(5, range="[0, inf)", unit="Gauss-Newton steps",
+                                    doc="at most this many Gauss-Newton steps with the kept loops after the robust "
+                                        "solve, from its estimate (LM stops at its cost tolerance, which on a flat "
+                                        "objective leaves the map far from the optimum: w10000 0.56 m); 0: off")
+    polish_step_tol: float = setting(1e-3, range="[0, inf)", unit="x map extent",
+                                     doc="the polish stops after a step that moves no node by more than this x the "
+                                         "largest side of the map's bounding box (Gauss-Newton converges "
+                                         "quadratically there, so about tol^2 x extent is left: w10000 0.2 mm)")
 
 
 @dataclass(frozen=True)
