@@ -14,6 +14,8 @@
 4. polish with the kept loops; the group-level test (each kept revisit cluster one TLS term at the chi-square
    quantile of its n x dof, dropped when the objective is lower without it); then re-admit every rejected loop
    that fits its own threshold at the solution.
+5. once the loop set is decided, Gauss-Newton steps on the kept loops until the map stops moving (graph.polish):
+   LM's cost tolerance stops far from the optimum on a flat objective (w10000: 0.56 m).
 """
 from __future__ import annotations
 
