@@ -178,6 +178,15 @@ class RobustParams(Config):
     kernel_descent_rounds: int = setting(10, range="[1, inf)", unit="solves",
                                          doc="at most this many re-solves of its TLS descent (keep the loops that "
                                              "fit, re-solve, until the set is stable)")
+    # the final polish (graph.polish) once the loop set is decided
+    polish_max_steps: int = setting(5, range="[0, inf)", unit="Gauss-Newton steps",
+                                    doc="at most this many Gauss-Newton steps with the kept loops after the robust "
+                                        "solve, from its estimate (LM stops at its cost tolerance, which on a flat "
+                                        "objective leaves the map far from the optimum: w10000 0.56 m); 0: off")
+    polish_step_tol: float = setting(1e-3, range="[0, inf)", unit="x map extent",
+                                     doc="the polish stops after a step that moves no node by more than this x the "
+                                         "largest side of the map's bounding box (Gauss-Newton converges "
+                                         "quadratically there, so about tol^2 x extent is left: w10000 0.2 mm)")
     huber_k: float = setting(1.345, range="(0, inf)", doc="kernel width on the whitened residual norm")
     cauchy_k: float = setting(1.0, range="(0, inf)")
     loop_weighting: LoopWeighting = LoopWeighting.THRESHOLD

@@ -14,6 +14,8 @@
 4. polish with the kept loops; the group-level test (each kept revisit cluster one TLS term at the chi-square
    quantile of its n x dof, dropped when the objective is lower without it); then re-admit every rejected loop
    that fits its own threshold at the solution.
+5. once the loop set is decided, Gauss-Newton steps on the kept loops until the map stops moving (graph.polish):
+   LM's cost tolerance stops far from the optimum on a flat objective (w10000: 0.56 m).
 """
 from __future__ import annotations
 
@@ -29,6 +31,7 @@ from graph.gnc import tls_weights
 from graph.kernel_start import dcs_solve, tls_descent
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, LoopWeighting
+from graph.polish import polish
 from graph.result import GraphResult
 from graph.support import clusters, loop_support, revisits
 from graph.thresholds import loop_thresholds
@@ -326,9 +329,14 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             notes.append(f"{int(trial.sum())} unsupported loops tried jointly: {int((kept & trial[pool]).sum())} kept")
         values, inlier, it = _readmit(built, values, inlier, c2, params, notes)
         iters += it
+    t_polish = time.perf_counter()
+    # 5. the loop set is decided: converge the map on it (graph.polish; LM stopped at its cost tolerance)
+    values, it, why = polish(built.graph(inlier), values, data.dim, params)
+    iters += it
     t_end = time.perf_counter()
+    notes.append(f"polish: {it} Gauss-Newton steps ({why})")
     notes.append(f"stages: support+starts {init_seconds:.2f} s, GNC {t_gnc - t0 - init_seconds:.2f} s, "
-                 f"trial+readmit {t_end - t_gnc:.2f} s")
+                 f"trial+readmit {t_polish - t_gnc:.2f} s, polish {t_end - t_polish:.2f} s")
     r2 = built.r2(values)
     final_cost = float(built.graph(inlier).error(values))
     notes.append(f"support: {int(supported.sum())} of {L} loops")
