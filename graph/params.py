@@ -219,6 +219,11 @@ class RobustParams(Config):
     consensus_inner_iterations: int = setting(2, range="[1, inf)", unit="LM iterations",
                                               doc="warm-started LM iterations per GNC outer step (consensus mode); "
                                                   "also caps the least-squares solve of the supported-loop start")
+    consensus_binary_converge: bool = setting(
+        True, doc="once every GNC weight is binary (0 or 1), solve each further outer step to convergence instead "
+                  "of `consensus_inner_iterations`: the steps left are then a TLS descent, and with a few warm "
+                  "iterations per step it moved by a few dozen labels per step for 40+ steps (city10000 at 50 % "
+                  "random-grouped false loops) until the map settled")
 
 
 @dataclass(frozen=True)

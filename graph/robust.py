@@ -68,14 +68,21 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
     if np.any(r2_cl > c2_cl):
         pos = excess > 0
         mu = max(float(np.min(c2_cl[pos] / excess[pos])), 1e-6)
+        tol = params.robust.gnc_weights_tol
         for outer in range(1, params.robust.gnc_max_iterations + 1):
             new_w = tls_weights(r2_cl, c2_cl, mu)
-            values, it = _lm(_weighted(base, loops, new_w[label]), values, params, params.robust.consensus_inner_iterations)
+            inner = params.robust.consensus_inner_iterations
+            if (params.robust.consensus_binary_converge and outer > 1
+                    and bool(np.all((new_w < tol) | (new_w > 1 - tol)))
+                    and float(np.max(np.abs(new_w - weights))) >= tol):
+                # binary weights that still change: the surrogate is TLS itself from here on, and a few warm
+                # iterations per step only creep towards the next labels (a label-flip tail of 40+ steps)
+                inner = params.solver.lm_max_iterations
+            values, it = _lm(_weighted(base, loops, new_w[label]), values, params, inner)
             iters += it
             r2_cl = np.bincount(label, weights=sub.r2(values), minlength=n_cl)
             change = float(np.max(np.abs(new_w - weights)))
             weights = new_w
-            tol = params.robust.gnc_weights_tol
             if bool(np.all((weights < tol) | (weights > 1 - tol))) and change < tol:
                 break
             mu *= params.robust.consensus_mu_step
