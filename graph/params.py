@@ -175,6 +175,11 @@ class RobustParams(Config):
                                 doc="DCS kernel width of that start (Agarwal et al. 2013: 1) on r^2 in the loops' "
                                     "stated units times the variance factor of the agreeing cycles (public graphs "
                                     "state noise 10-1000x too loose)")
+    kernel_start_always: bool = setting(
+        False, doc="run the DCS-kernel start even when the supported and the odometry GNC starts kept the same loops "
+                   "(it exists for a surrogate bent by false groups, which leaves the two GNC starts in different "
+                   "minima; when they agree it never won on the rows measured, and it is the costliest start: a DCS "
+                   "solve to convergence, 36 % of city10000 at 50 % random false loops)")
     kernel_descent_rounds: int = setting(10, range="[1, inf)", unit="solves",
                                          doc="at most this many re-solves of its TLS descent (keep the loops that "
                                              "fit, re-solve, until the set is stable)")
