@@ -6,7 +6,7 @@ config file can set anything those expose:
     vo:        {max_features: 300}
     loops:     {mode: 5, database: {confirmations: 2}}      # or {recognizer: vocab, vocab: {min_inliers: 25}}
     graph:     {robust: gnc}
-    keyframes: {distance: 0.1}
+    keyframes: {footprint_fraction: 0.25}   # or {distance: 0.1} in metres
 
 Loading, dumping, presets, `--set`-style overrides and the range of every value come from
 `odometry.shared.config.Config`.
@@ -20,6 +20,7 @@ from graph.params import GraphParams
 from loops.cdvs.params import MODES
 from loops.loop_detector import DatabaseParams
 from odometry.fusion import FusionConfig
+from odometry.shared.camera import CameraModel
 from odometry.shared.config import Config, ConfigError, setting
 from odometry.vo import VOConfig
 from vslam.pipeline.motion_gate import MotionGateParams
@@ -29,12 +30,29 @@ from vslam.pipeline.motion_gate import MotionGateParams
 class KeyframePolicy(Config):
     """When a frame becomes a loop keyframe (and a pose-graph node): after the robot moved or turned enough."""
 
-    # 0.25 m is well inside the 0.64 x 0.48 m footprint of the default camera: a revisit always finds a stored
-    # keyframe within 0.125 m along the track, so J >= 0.33 loops are not missed for lack of keyframes
-    distance: float = setting(0.25, range="(0, inf)", unit="m", doc="travelled since the last keyframe")
+    # spacing in footprints, not metres: a metric spacing made every frame a keyframe for a camera 40 m up (a 40 m
+    # footprint) and skipped a 5 cm camera's whole footprint. Half the footprint's shorter side: a revisit anywhere
+    # along the track has a stored keyframe within a quarter footprint (implied overlap J >= 0.6 along track, well
+    # above the 0.33 that defines a loop), and on the default camera (0.64 x 0.48 m footprint) it is 0.24 m, the
+    # 0.25 m spacing the pipeline used before, so floor runs keep their keyframes
+    footprint_fraction: float = setting(0.5, range="(0, inf)", unit="shorter side of the floor footprint",
+                                        doc="travelled since the last keyframe")
+    distance: float | None = setting(None, range="(0, inf)", unit="m",
+                                     doc="travelled since the last keyframe, in metres instead of footprint_fraction "
+                                         "(None: footprint_fraction)")
     angle_deg: float = setting(20.0, range="(0, inf)", unit="deg", doc="or turned")
     max_frames: int = setting(60, range="[1, inf)",
                               doc="or frames elapsed (keeps the graph connected when standing still)")
+
+    def spacing(self, camera: CameraModel) -> float:
+        """Metres travelled between keyframes for this camera (`distance`, else the footprint fraction)."""
+        if self.distance is not None:
+            return float(self.distance)
+        if camera.camera_height is None:
+            raise ConfigError("keyframes.footprint_fraction needs the camera height (camera.yaml camera_height); "
+                              "set keyframes.distance in metres instead")
+        short = camera.camera_height * min(camera.width / camera.fx, camera.height / camera.fy)
+        return self.footprint_fraction * short
 
 
 RECOGNIZERS = ("cdvs", "vocab")
@@ -82,6 +100,13 @@ class LoopConfig(Config):
                                     doc="fewer consistent pairs: the loop gives no pose and is not used")
     pose_pixel_sigma: float = setting(1.0, range="(0, inf)", unit="px",
                                       doc="pixel noise of decoded keypoints (coarse coordinate coding)")
+    # a loop's fit covariance (sigma^2 (J^T J)^-1) treats its pairs as independent and shrinks as 1/inliers, but
+    # each image's registration on the floor carries an error common to all its points (camera tilt and height at
+    # that instant: ~2 mm at 0.5 m for a 0.2 deg wobble) that no number of pairs removes; the fit's RMS residual is
+    # the per-image scale of that error (decoded-keypoint noise plus the tilt's perspective bend)
+    image_sigma_rms: float = setting(0.0, range="[0, inf)", unit="fit RMS residuals",
+                                     doc="per-axis position sigma of each of a loop's two images, added to the "
+                                         "loop's covariance in the graph (0: the fit's covariance alone)")
     vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
     # a verified loop must agree with the visual odometry between its two keyframes (drift-aware; the loop's floor
     # fit above is the one judged, and the one given to the graph)
@@ -121,9 +146,13 @@ class PipelineConfig(Config):
     recording: RecordingConfig = field(default_factory=RecordingConfig)
     seed: int = setting(0, range="[0, inf)")
 
-    def database_params(self) -> DatabaseParams:
-        """The loop database settings, with the recent-keyframe exclusion converted from metres to keyframes."""
+    def database_params(self, camera: CameraModel | None = None) -> DatabaseParams:
+        """The loop database settings, with the recent-keyframe exclusion converted from metres to keyframes at the
+        keyframe spacing for `camera` (without a camera, only a metric `keyframes.distance` converts)."""
         db = self.loops.database
         if self.loops.exclude_distance is None:
             return db
-        return db.replace(exclude_recent=int(math.ceil(self.loops.exclude_distance / self.keyframes.distance)))
+        if camera is None and self.keyframes.distance is None:
+            return db
+        spacing = self.keyframes.distance if camera is None else self.keyframes.spacing(camera)
+        return db.replace(exclude_recent=int(math.ceil(self.loops.exclude_distance / spacing)))

@@ -128,6 +128,7 @@ class Pipeline:
         cfg = self.config
         self.camera = camera
         self.vo = VisualOdometry(camera, cfg.vo)
+        self.keyframe_spacing = cfg.keyframes.spacing(camera)    # metres
         self.rng = np.random.default_rng(cfg.seed)
         gp = cfg.loops.gate
         self.relative_motion = AnchoredMotion(self._keyframe_motion, self._anchors, lambda: self.keyframes,
@@ -169,7 +170,7 @@ class Pipeline:
             return True
         kp = self.config.keyframes
         d = self._acc_delta
-        return (math.hypot(d[0], d[1]) >= kp.distance or abs(d[2]) >= math.radians(kp.angle_deg)
+        return (math.hypot(d[0], d[1]) >= self.keyframe_spacing or abs(d[2]) >= math.radians(kp.angle_deg)
                 or self._since_kf >= kp.max_frames)
 
     def slam_pose(self, index: int) -> np.ndarray:
@@ -282,13 +283,19 @@ class Pipeline:
                     rec.delta, rec.covariance, rec.pose_inliers = lp.delta, lp.covariance, lp.n_inliers
                     rec.pose_rms = float(lp.rms)
                     rec.loop_index = self.graph.add_loop(rec.match_frame, rec.query_frame, lp.delta,
-                                                         floored(lp.covariance), rec.probability)
+                                                         floored(self._graph_loop_covariance(lp)), rec.probability)
                     self.graph_loops.append(rec)
                     self._add_anchor(rec)
                     self._new_loops += 1
             out.append(rec)
         self.loops.extend(out)
         return out
+
+    def _graph_loop_covariance(self, lp: LoopPose) -> np.ndarray:
+        """The loop's covariance in the graph: its fit's, plus each image's registration error (common to all its
+        pairs, so not in the fit's covariance): two images, each `image_sigma_rms` fit RMS residuals per axis."""
+        s2 = 2.0 * (self.config.loops.image_sigma_rms * lp.rms) ** 2
+        return np.asarray(lp.covariance, float) + np.diag([s2, s2, 0.0])
 
     def _loop_fit(self, v) -> LoopPose | None:
         """The loop's floor motion from its verified pixel pairs (None: too few pairs on one rigid motion)."""

@@ -1,0 +1,52 @@
+"""Keyframe spacing scales with the camera's floor footprint (keyframes.footprint_fraction), not a fixed distance
+in metres: a 40 m-high camera is not given a keyframe every frame, a 5 cm camera does not skip its footprint."""
+import numpy as np
+import pytest
+
+from odometry.shared.camera import CameraModel
+from odometry.shared.config import ConfigError
+from odometry.vo import VOEstimate, VOStatus
+from vslam.pipeline import KeyframePolicy, Pipeline, PipelineConfig
+
+
+def _camera(height: float) -> CameraModel:
+    return CameraModel(width=640, height=480, fx=500.0, fy=500.0, cx=319.5, cy=239.5, camera_height=height)
+
+
+def _keyframes(height: float, step: float, frames: int, **policy) -> int:
+    """Keyframes of a straight run at `step` metres per frame (VO given, no images, loops off)."""
+    base = PipelineConfig()
+    cfg = base.replace(keyframes=base.keyframes.replace(**policy), loops=base.loops.replace(enabled=False),
+                       recording=base.recording.replace(enabled=False))
+    p = Pipeline(cfg, _camera(height))
+    cov = np.diag([1e-8, 1e-8, 1e-10])
+    for i in range(frames):
+        d = np.array([step if i else 0.0, 0.0, 0.0])
+        p.step(None, 0.1 * i, vo=VOEstimate(i, 0.1 * i, d, cov, VOStatus.OK if i else VOStatus.INIT,
+                                            pose=np.array([step * i, 0.0, 0.0])))
+    return len(p.keyframes)
+
+
+def test_default_spacing_is_half_the_footprint_short_side():
+    # the default camera: 0.64 x 0.48 m footprint at 0.5 m -> 0.24 m, about the former 0.25 m
+    assert KeyframePolicy().spacing(_camera(0.5)) == pytest.approx(0.24)
+    assert KeyframePolicy().spacing(_camera(40.0)) == pytest.approx(19.2)
+    assert KeyframePolicy(distance=0.25).spacing(_camera(40.0)) == 0.25   # the metric spacing stays an option
+
+
+@pytest.mark.parametrize("height, step", [(40.0, 0.4), (0.5, 0.005), (0.05, 0.0005)])
+def test_keyframes_per_footprint_do_not_depend_on_the_height(height, step):
+    # the same run in footprints (100 frames, each 1/96 of the footprint's short side) at any scale:
+    # the same keyframe count; in metres (0.25 m) a 40 m camera made every frame a keyframe and a 5 cm one none
+    n = _keyframes(height, step, 100)
+    assert n == _keyframes(0.5, 0.005, 100)
+    assert 3 <= n <= 6
+    metric = _keyframes(height, step, 100, distance=0.25)
+    if height != 0.5:
+        assert metric == 100 or metric <= 2
+
+
+def test_footprint_spacing_needs_a_camera_height():
+    cam = CameraModel(width=640, height=480, fx=500.0, fy=500.0, cx=319.5, cy=239.5)
+    with pytest.raises(ConfigError, match="keyframes.distance"):
+        KeyframePolicy().spacing(cam)
