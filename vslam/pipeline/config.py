@@ -104,7 +104,7 @@ class LoopConfig(Config):
     # each image's registration on the floor carries an error common to all its points (camera tilt and height at
     # that instant: ~2 mm at 0.5 m for a 0.2 deg wobble) that no number of pairs removes; the fit's RMS residual is
     # the per-image scale of that error (decoded-keypoint noise plus the tilt's perspective bend)
-    image_sigma_rms: float = setting(0.0, range="[0, inf)", unit="fit RMS residuals",
+    image_sigma_rms: float = setting(1.0, range="[0, inf)", unit="fit RMS residuals",
                                      doc="per-axis position sigma of each of a loop's two images, added to the "
                                          "loop's covariance in the graph (0: the fit's covariance alone)")
     vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
