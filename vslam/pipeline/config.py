@@ -107,6 +107,14 @@ class LoopConfig(Config):
     image_sigma_rms: float = setting(1.0, range="[0, inf)", unit="fit RMS residuals",
                                      doc="per-axis position sigma of each of a loop's two images, added to the "
                                          "loop's covariance in the graph (0: the fit's covariance alone)")
+    # loops accepted below the P = 1 threshold (database.gated_min_probability) fit 25-45 pairs on a small overlap:
+    # on the tuning sequences (our simulator seeds 1-3 and render_floor s21/s22, 2 laps; the 100 m carpet loop)
+    # their rotation error was 1.5-2x the fit's stated sigma (median |error|/sigma 1.0-1.3, 0.67 for a consistent
+    # Gaussian) while loops above the threshold matched theirs (0.6-0.8); a rotation error is what a lap-long graph
+    # turns into position error (0.01 deg is 3 mm at 16 m)
+    gated_rotation_variance: float = setting(3.0, range="[1, inf)", unit="x the fit's rotation variance",
+                                             doc="rotation variance in the graph of a loop accepted below the "
+                                                 "score threshold (gated acceptance), relative to its fit's")
     vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
     # a verified loop must agree with the visual odometry between its two keyframes (drift-aware; the loop's floor
     # fit above is the one judged, and the one given to the graph)

@@ -283,7 +283,8 @@ class Pipeline:
                     rec.delta, rec.covariance, rec.pose_inliers = lp.delta, lp.covariance, lp.n_inliers
                     rec.pose_rms = float(lp.rms)
                     rec.loop_index = self.graph.add_loop(rec.match_frame, rec.query_frame, lp.delta,
-                                                         floored(self._graph_loop_covariance(lp)), rec.probability)
+                                                         floored(self._graph_loop_covariance(lp, not v.accepted)),
+                                                         rec.probability)
                     self.graph_loops.append(rec)
                     self._add_anchor(rec)
                     self._new_loops += 1
@@ -291,11 +292,18 @@ class Pipeline:
         self.loops.extend(out)
         return out
 
-    def _graph_loop_covariance(self, lp: LoopPose) -> np.ndarray:
+    def _graph_loop_covariance(self, lp: LoopPose, below_threshold: bool) -> np.ndarray:
         """The loop's covariance in the graph: its fit's, plus each image's registration error (common to all its
-        pairs, so not in the fit's covariance): two images, each `image_sigma_rms` fit RMS residuals per axis."""
-        s2 = 2.0 * (self.config.loops.image_sigma_rms * lp.rms) ** 2
-        return np.asarray(lp.covariance, float) + np.diag([s2, s2, 0.0])
+        pairs, so not in the fit's covariance): two images, each `image_sigma_rms` fit RMS residuals per axis; a
+        loop accepted below the score threshold (few pairs on a small overlap) has its rotation variance scaled."""
+        lc = self.config.loops
+        cov = np.array(lp.covariance, float)
+        if below_threshold:
+            k = math.sqrt(lc.gated_rotation_variance)
+            cov[2, :] *= k
+            cov[:, 2] *= k
+        s2 = 2.0 * (lc.image_sigma_rms * lp.rms) ** 2
+        return cov + np.diag([s2, s2, 0.0])
 
     def _loop_fit(self, v) -> LoopPose | None:
         """The loop's floor motion from its verified pixel pairs (None: too few pairs on one rigid motion)."""
