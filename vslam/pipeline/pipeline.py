@@ -159,6 +159,7 @@ class Pipeline:
         self._acc_delta = np.zeros(3)            # VO motion since the last keyframe and its covariance
         self._acc_cov = np.zeros((3, 3))
         self._since_kf = 0
+        self._last_step = 0.0                    # metres moved by the latest frame (the look-ahead of _is_keyframe)
         self._new_loops = 0
         self._last_image = None
         self.last_result = None
@@ -170,7 +171,10 @@ class Pipeline:
             return True
         kp = self.config.keyframes
         d = self._acc_delta
-        return (math.hypot(d[0], d[1]) >= self.keyframe_spacing or abs(d[2]) >= math.radians(kp.angle_deg)
+        # a keyframe once the next frame, at the current speed, would land beyond the spacing: keyframes stay at most
+        # one spacing apart whatever the frame rate (without it, steps of 0.35-1 spacing made every second frame a
+        # keyframe, gaps up to two spacings, and a low-rate run lost half its loop queries)
+        return (math.hypot(d[0], d[1]) + self._last_step > self.keyframe_spacing or abs(d[2]) >= math.radians(kp.angle_deg)
                 or self._since_kf >= kp.max_frames)
 
     def slam_pose(self, index: int) -> np.ndarray:
@@ -205,6 +209,7 @@ class Pipeline:
             self._acc_delta, self._acc_cov = compose_with_covariance(self._acc_delta, self._acc_cov, est.delta,
                                                                      est.covariance)
         self._since_kf += 1
+        self._last_step = math.hypot(est.delta[0], est.delta[1]) if index > 0 else 0.0
         keyframe = self._is_keyframe(index)
         t_loops = t_graph = 0.0
         found: list[LoopRecord] = []
