@@ -54,8 +54,8 @@ def test_footprint_spacing_needs_a_camera_height():
 
 def test_a_low_rate_run_keeps_every_frame_when_steps_are_a_large_part_of_the_spacing():
     # 14 m per frame under a camera 40 m up (35 % of its 40 m footprint side, the drone lanes of issue 13): the
-    # spacing is 19.2 m; a keyframe "after 19.2 m" made every second frame one (gaps of 28 m, half the loop queries
-    # lost); keyframes stay at most one spacing apart instead
+    # spacing is 19.2 m; "the first frame past 19.2 m" made every second frame a keyframe (gaps of 28 m, half the
+    # loop queries lost); the frame nearest the spacing is every frame here
     assert _keyframes(40.0, 14.0, 20) == 20
     # and at 5 Hz over the same ground (0.39 m per frame) about one keyframe per spacing, not one per frame
     assert 8 <= _keyframes(40.0, 0.392, 500) <= 12

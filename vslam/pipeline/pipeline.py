@@ -171,10 +171,11 @@ class Pipeline:
             return True
         kp = self.config.keyframes
         d = self._acc_delta
-        # a keyframe once the next frame, at the current speed, would land beyond the spacing: keyframes stay at most
-        # one spacing apart whatever the frame rate (without it, steps of 0.35-1 spacing made every second frame a
-        # keyframe, gaps up to two spacings, and a low-rate run lost half its loop queries)
-        return (math.hypot(d[0], d[1]) + self._last_step > self.keyframe_spacing or abs(d[2]) >= math.radians(kp.angle_deg)
+        # the frame nearest the spacing becomes the keyframe (this one, when the next, at the current speed, would
+        # be farther past it than this one is short of it): gaps average one spacing at any frame rate; "the first
+        # frame past the spacing" made every second frame a keyframe at steps of 0.35-1 spacing (gaps up to two
+        # spacings), and a low-rate run lost half its loop queries
+        return (math.hypot(d[0], d[1]) + 0.5 * self._last_step >= self.keyframe_spacing or abs(d[2]) >= math.radians(kp.angle_deg)
                 or self._since_kf >= kp.max_frames)
 
     def slam_pose(self, index: int) -> np.ndarray:
