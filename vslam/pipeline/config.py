@@ -16,6 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from graph.params import GraphParams
 from loops.cdvs.params import MODES
 from loops.loop_detector import DatabaseParams
@@ -31,11 +33,14 @@ class KeyframePolicy(Config):
     """When a frame becomes a loop keyframe (and a pose-graph node): after the robot moved or turned enough."""
 
     # spacing in footprints, not metres: a metric spacing made every frame a keyframe for a camera 40 m up (a 40 m
-    # footprint) and skipped a 5 cm camera's whole footprint. Half the footprint's shorter side: a revisit anywhere
-    # along the track has a stored keyframe within a quarter footprint (implied overlap J >= 0.6 along track, well
-    # above the 0.33 that defines a loop), and on the default camera (0.64 x 0.48 m footprint) it is 0.24 m, the
-    # 0.25 m spacing the pipeline used before, so floor runs keep their keyframes
-    footprint_fraction: float = setting(0.5, range="(0, inf)", unit="shorter side of the floor footprint",
+    # footprint) and skipped a 5 cm camera's whole footprint. Measured along the direction of travel, since the
+    # overlap of two views a distance d apart along it is (L - d) / (L + d) for the footprint's length L that way.
+    # 0.375 L: consecutive keyframes overlap by J >= 0.45, a revisit anywhere along the track has a stored keyframe
+    # within 0.19 L (J >= 0.68, well above the 0.33 that defines a loop); on the default camera driving along its
+    # 0.65 m footprint length it is 0.246 m, the 0.25 m spacing the pipeline used before, so floor runs keep their
+    # keyframes; under a drone's 40 m footprint it is 15 m, so 0.14 Hz frames 14 m apart all stay keyframes
+    footprint_fraction: float = setting(0.375, range="(0, inf)",
+                                        unit="footprint length along the direction of travel",
                                         doc="travelled since the last keyframe")
     distance: float | None = setting(None, range="(0, inf)", unit="m",
                                      doc="travelled since the last keyframe, in metres instead of footprint_fraction "
@@ -44,15 +49,21 @@ class KeyframePolicy(Config):
     max_frames: int = setting(60, range="[1, inf)",
                               doc="or frames elapsed (keeps the graph connected when standing still)")
 
-    def spacing(self, camera: CameraModel) -> float:
-        """Metres travelled between keyframes for this camera (`distance`, else the footprint fraction)."""
+    def spacing(self, camera: CameraModel, direction: tuple[float, float] | None = None) -> float:
+        """Metres travelled between keyframes for this camera moving along `direction` (base frame; None: the
+        footprint's shorter extent along the base axes): `distance`, else the footprint fraction."""
         if self.distance is not None:
             return float(self.distance)
         if camera.camera_height is None:
             raise ConfigError("keyframes.footprint_fraction needs the camera height (camera.yaml camera_height); "
                               "set keyframes.distance in metres instead")
-        short = camera.camera_height * min(camera.width / camera.fx, camera.height / camera.fy)
-        return self.footprint_fraction * short
+        poly = camera.footprint()
+        if direction is None:
+            length = float(min(np.ptp(poly[:, 0]), np.ptp(poly[:, 1])))
+        else:
+            u = np.asarray(direction, float) / math.hypot(direction[0], direction[1])
+            length = float(np.ptp(poly @ u))
+        return self.footprint_fraction * length
 
 
 RECOGNIZERS = ("cdvs", "vocab")

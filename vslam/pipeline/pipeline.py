@@ -128,7 +128,6 @@ class Pipeline:
         cfg = self.config
         self.camera = camera
         self.vo = VisualOdometry(camera, cfg.vo)
-        self.keyframe_spacing = cfg.keyframes.spacing(camera)    # metres
         self.rng = np.random.default_rng(cfg.seed)
         gp = cfg.loops.gate
         self.relative_motion = AnchoredMotion(self._keyframe_motion, self._anchors, lambda: self.keyframes,
@@ -175,7 +174,8 @@ class Pipeline:
         # be farther past it than this one is short of it): gaps average one spacing at any frame rate; "the first
         # frame past the spacing" made every second frame a keyframe at steps of 0.35-1 spacing (gaps up to two
         # spacings), and a low-rate run lost half its loop queries
-        return (math.hypot(d[0], d[1]) + 0.5 * self._last_step >= self.keyframe_spacing or abs(d[2]) >= math.radians(kp.angle_deg)
+        moved = math.hypot(d[0], d[1])
+        return ((moved > 0 and moved + 0.5 * self._last_step >= kp.spacing(self.camera, (d[0], d[1]))) or abs(d[2]) >= math.radians(kp.angle_deg)
                 or self._since_kf >= kp.max_frames)
 
     def slam_pose(self, index: int) -> np.ndarray:
