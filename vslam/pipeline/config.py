@@ -35,11 +35,12 @@ class KeyframePolicy(Config):
     # spacing in footprints, not metres: a metric spacing made every frame a keyframe for a camera 40 m up (a 40 m
     # footprint) and skipped a 5 cm camera's whole footprint. Measured along the direction of travel, since the
     # overlap of two views a distance d apart along it is (L - d) / (L + d) for the footprint's length L that way.
-    # 0.375 L: consecutive keyframes overlap by J >= 0.45, a revisit anywhere along the track has a stored keyframe
-    # within 0.19 L (J >= 0.68, well above the 0.33 that defines a loop); on the default camera driving along its
-    # 0.65 m footprint length it is 0.246 m, the 0.25 m spacing the pipeline used before, so floor runs keep their
-    # keyframes; under a drone's 40 m footprint it is 15 m, so 0.14 Hz frames 14 m apart all stay keyframes
-    footprint_fraction: float = setting(0.375, range="(0, inf)",
+    # 0.42 L: consecutive keyframes overlap by J >= 0.41, a revisit anywhere along the track has a stored keyframe
+    # within 0.21 L (J >= 0.65, well above the 0.33 that defines a loop); on the default camera driving along its
+    # 0.655 m footprint length it is 0.275 m, the mean gap of the former "first frame past 0.25 m" at 1 m/s and
+    # 20 fps, so floor runs keep their keyframes; under a drone's 40 m footprint it is 17 m, so 0.14 Hz frames
+    # 14 m apart all stay keyframes
+    footprint_fraction: float = setting(0.42, range="(0, inf)",
                                         unit="footprint length along the direction of travel",
                                         doc="travelled since the last keyframe")
     distance: float | None = setting(None, range="(0, inf)", unit="m",
