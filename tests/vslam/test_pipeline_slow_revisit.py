@@ -22,7 +22,9 @@ def demo_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("demo")
     simulate(SimConfig(), root / "seq")
     seq = open_sequence(root / "seq")
-    cfg = PipelineConfig().replace(recording={"enabled": False})
+    # keyframes 0.25 m apart: the keyframes this test was written on, whose closing one verifies below P = 1 (at
+    # the default footprint spacing both closing keyframes of the demo verify at P = 1 and the gated path is idle)
+    cfg = PipelineConfig().replace(recording={"enabled": False}, keyframes={"distance": 0.25})
     res = Pipeline(cfg).run(seq)
     return root, seq, res
 

@@ -149,7 +149,7 @@ def evaluate_result(result, seq) -> dict:
                           np.array([bool(l.inlier) for l in L]))
         # positives under the detector's own exclusions, as `vslam eval` counts them from run.json: the same run
         # must not report two recalls
-        db = result.config.database_params()
+        db = result.config.database_params(result.camera)
         kw = dict(queried=result.keyframes, min_separation=db.exclude_recent + 1, stamps=result.timestamps,
                   min_seconds=float(db.exclude_seconds), after_leaving=bool(db.exclude_unleft))
         out["loops"] = {"accepted": loop_precision_recall(result.camera, gt_frames, table, **kw),

@@ -6,7 +6,7 @@ config file can set anything those expose:
     vo:        {max_features: 300}
     loops:     {mode: 5, database: {confirmations: 2}}      # or {recognizer: vocab, vocab: {min_inliers: 25}}
     graph:     {robust: gnc}
-    keyframes: {distance: 0.1}
+    keyframes: {footprint_fraction: 0.25}   # or {distance: 0.1} in metres
 
 Loading, dumping, presets, `--set`-style overrides and the range of every value come from
 `odometry.shared.config.Config`.
@@ -16,10 +16,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from graph.params import GraphParams
 from loops.cdvs.params import MODES
 from loops.loop_detector import DatabaseParams
 from odometry.fusion import FusionConfig
+from odometry.shared.camera import CameraModel
 from odometry.shared.config import Config, ConfigError, setting
 from odometry.vo import VOConfig
 from vslam.pipeline.motion_gate import MotionGateParams
@@ -29,12 +32,39 @@ from vslam.pipeline.motion_gate import MotionGateParams
 class KeyframePolicy(Config):
     """When a frame becomes a loop keyframe (and a pose-graph node): after the robot moved or turned enough."""
 
-    # 0.25 m is well inside the 0.64 x 0.48 m footprint of the default camera: a revisit always finds a stored
-    # keyframe within 0.125 m along the track, so J >= 0.33 loops are not missed for lack of keyframes
-    distance: float = setting(0.25, range="(0, inf)", unit="m", doc="travelled since the last keyframe")
+    # spacing in footprints, not metres: a metric spacing made every frame a keyframe for a camera 40 m up (a 40 m
+    # footprint) and skipped a 5 cm camera's whole footprint. Measured along the direction of travel, since the
+    # overlap of two views a distance d apart along it is (L - d) / (L + d) for the footprint's length L that way.
+    # 0.42 L: consecutive keyframes overlap by J >= 0.41, a revisit anywhere along the track has a stored keyframe
+    # within 0.21 L (J >= 0.65, well above the 0.33 that defines a loop); on the default camera driving along its
+    # 0.655 m footprint length it is 0.275 m, the mean gap of the former "first frame past 0.25 m" at 1 m/s and
+    # 20 fps, so floor runs keep their keyframes; under a drone's 40 m footprint it is 17 m, so 0.14 Hz frames
+    # 14 m apart all stay keyframes
+    footprint_fraction: float = setting(0.42, range="(0, inf)",
+                                        unit="footprint length along the direction of travel",
+                                        doc="travelled since the last keyframe")
+    distance: float | None = setting(None, range="(0, inf)", unit="m",
+                                     doc="travelled since the last keyframe, in metres instead of footprint_fraction "
+                                         "(None: footprint_fraction)")
     angle_deg: float = setting(20.0, range="(0, inf)", unit="deg", doc="or turned")
     max_frames: int = setting(60, range="[1, inf)",
                               doc="or frames elapsed (keeps the graph connected when standing still)")
+
+    def spacing(self, camera: CameraModel, direction: tuple[float, float] | None = None) -> float:
+        """Metres travelled between keyframes for this camera moving along `direction` (base frame; None: the
+        footprint's shorter extent along the base axes): `distance`, else the footprint fraction."""
+        if self.distance is not None:
+            return float(self.distance)
+        if camera.camera_height is None:
+            raise ConfigError("keyframes.footprint_fraction needs the camera height (camera.yaml camera_height); "
+                              "set keyframes.distance in metres instead")
+        poly = camera.footprint()
+        if direction is None:
+            length = float(min(np.ptp(poly[:, 0]), np.ptp(poly[:, 1])))
+        else:
+            u = np.asarray(direction, float) / math.hypot(direction[0], direction[1])
+            length = float(np.ptp(poly @ u))
+        return self.footprint_fraction * length
 
 
 RECOGNIZERS = ("cdvs", "vocab")
@@ -82,6 +112,21 @@ class LoopConfig(Config):
                                     doc="fewer consistent pairs: the loop gives no pose and is not used")
     pose_pixel_sigma: float = setting(1.0, range="(0, inf)", unit="px",
                                       doc="pixel noise of decoded keypoints (coarse coordinate coding)")
+    # a loop's fit covariance (sigma^2 (J^T J)^-1) treats its pairs as independent and shrinks as 1/inliers, but
+    # each image's registration on the floor carries an error common to all its points (camera tilt and height at
+    # that instant: ~2 mm at 0.5 m for a 0.2 deg wobble) that no number of pairs removes; the fit's RMS residual is
+    # the per-image scale of that error (decoded-keypoint noise plus the tilt's perspective bend)
+    image_sigma_rms: float = setting(1.0, range="[0, inf)", unit="fit RMS residuals",
+                                     doc="per-axis position sigma of each of a loop's two images, added to the "
+                                         "loop's covariance in the graph (0: the fit's covariance alone)")
+    # loops accepted below the P = 1 threshold (database.gated_min_probability) fit 25-45 pairs on a small overlap:
+    # on the tuning sequences (our simulator seeds 1-3 and render_floor s21/s22, 2 laps; the 100 m carpet loop)
+    # their rotation error was 1.5-2x the fit's stated sigma (median |error|/sigma 1.0-1.3, 0.67 for a consistent
+    # Gaussian) while loops above the threshold matched theirs (0.6-0.8); a rotation error is what a lap-long graph
+    # turns into position error (0.01 deg is 3 mm at 16 m)
+    gated_rotation_variance: float = setting(3.0, range="[1, inf)", unit="x the fit's rotation variance",
+                                             doc="rotation variance in the graph of a loop accepted below the "
+                                                 "score threshold (gated acceptance), relative to its fit's")
     vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
     # a verified loop must agree with the visual odometry between its two keyframes (drift-aware; the loop's floor
     # fit above is the one judged, and the one given to the graph)
@@ -121,9 +166,13 @@ class PipelineConfig(Config):
     recording: RecordingConfig = field(default_factory=RecordingConfig)
     seed: int = setting(0, range="[0, inf)")
 
-    def database_params(self) -> DatabaseParams:
-        """The loop database settings, with the recent-keyframe exclusion converted from metres to keyframes."""
+    def database_params(self, camera: CameraModel | None = None) -> DatabaseParams:
+        """The loop database settings, with the recent-keyframe exclusion converted from metres to keyframes at the
+        keyframe spacing for `camera` (without a camera, only a metric `keyframes.distance` converts)."""
         db = self.loops.database
         if self.loops.exclude_distance is None:
             return db
-        return db.replace(exclude_recent=int(math.ceil(self.loops.exclude_distance / self.keyframes.distance)))
+        if camera is None and self.keyframes.distance is None:
+            return db
+        spacing = self.keyframes.distance if camera is None else self.keyframes.spacing(camera)
+        return db.replace(exclude_recent=int(math.ceil(self.loops.exclude_distance / spacing)))

@@ -48,9 +48,9 @@ def write_outputs(result, out_dir: str | Path, sequence=None, evaluate: bool = T
     write_g2o(out / "graph.g2o", result.graph, poses)
     run_info = {"sequence": str(Path(result.sequence).resolve()) if result.sequence else None,
                 "camera": result.camera.to_dict(), "keyframes": result.keyframes.tolist(),
-                "loop_min_separation": int(result.config.database_params().exclude_recent) + 1,
-                "loop_exclude_seconds": float(result.config.database_params().exclude_seconds),
-                "loop_exclude_unleft": bool(result.config.database_params().exclude_unleft),
+                "loop_min_separation": int(result.config.database_params(result.camera).exclude_recent) + 1,
+                "loop_exclude_seconds": float(result.config.database_params(result.camera).exclude_seconds),
+                "loop_exclude_unleft": bool(result.config.database_params(result.camera).exclude_unleft),
                 "config": result.config.to_dict(), "bad_frames": list(bad_frames or [])}
     atomic_write_text(out / "run.json", json.dumps(run_info, indent=1) + "\n")
     metrics = {"summary": {**result.summary(), "bad_frames": len(bad_frames or [])}}

@@ -158,6 +158,7 @@ class Pipeline:
         self._acc_delta = np.zeros(3)            # VO motion since the last keyframe and its covariance
         self._acc_cov = np.zeros((3, 3))
         self._since_kf = 0
+        self._last_step = 0.0                    # metres moved by the latest frame (the look-ahead of _is_keyframe)
         self._new_loops = 0
         self._last_image = None
         self.last_result = None
@@ -169,7 +170,12 @@ class Pipeline:
             return True
         kp = self.config.keyframes
         d = self._acc_delta
-        return (math.hypot(d[0], d[1]) >= kp.distance or abs(d[2]) >= math.radians(kp.angle_deg)
+        # the frame nearest the spacing becomes the keyframe (this one, when the next, at the current speed, would
+        # be farther past it than this one is short of it): gaps average one spacing at any frame rate; "the first
+        # frame past the spacing" made every second frame a keyframe at steps of 0.35-1 spacing (gaps up to two
+        # spacings), and a low-rate run lost half its loop queries
+        moved = math.hypot(d[0], d[1])
+        return ((moved > 0 and moved + 0.5 * self._last_step >= kp.spacing(self.camera, (d[0], d[1]))) or abs(d[2]) >= math.radians(kp.angle_deg)
                 or self._since_kf >= kp.max_frames)
 
     def slam_pose(self, index: int) -> np.ndarray:
@@ -204,6 +210,7 @@ class Pipeline:
             self._acc_delta, self._acc_cov = compose_with_covariance(self._acc_delta, self._acc_cov, est.delta,
                                                                      est.covariance)
         self._since_kf += 1
+        self._last_step = math.hypot(est.delta[0], est.delta[1]) if index > 0 else 0.0
         keyframe = self._is_keyframe(index)
         t_loops = t_graph = 0.0
         found: list[LoopRecord] = []
@@ -282,13 +289,27 @@ class Pipeline:
                     rec.delta, rec.covariance, rec.pose_inliers = lp.delta, lp.covariance, lp.n_inliers
                     rec.pose_rms = float(lp.rms)
                     rec.loop_index = self.graph.add_loop(rec.match_frame, rec.query_frame, lp.delta,
-                                                         floored(lp.covariance), rec.probability)
+                                                         floored(self._graph_loop_covariance(lp, not v.accepted)),
+                                                         rec.probability)
                     self.graph_loops.append(rec)
                     self._add_anchor(rec)
                     self._new_loops += 1
             out.append(rec)
         self.loops.extend(out)
         return out
+
+    def _graph_loop_covariance(self, lp: LoopPose, below_threshold: bool) -> np.ndarray:
+        """The loop's covariance in the graph: its fit's, plus each image's registration error (common to all its
+        pairs, so not in the fit's covariance): two images, each `image_sigma_rms` fit RMS residuals per axis; a
+        loop accepted below the score threshold (few pairs on a small overlap) has its rotation variance scaled."""
+        lc = self.config.loops
+        cov = np.array(lp.covariance, float)
+        if below_threshold:
+            k = math.sqrt(lc.gated_rotation_variance)
+            cov[2, :] *= k
+            cov[:, 2] *= k
+        s2 = 2.0 * (lc.image_sigma_rms * lp.rms) ** 2
+        return cov + np.diag([s2, s2, 0.0])
 
     def _loop_fit(self, v) -> LoopPose | None:
         """The loop's floor motion from its verified pixel pairs (None: too few pairs on one rigid motion)."""

@@ -35,7 +35,7 @@ def cdvs_detector(config: PipelineConfig, camera: CameraModel | None = None,
     lc = config.loops
     model = LoopModel.load(lc.model) if lc.model else default_loop_model()
     params = CdvsParams.floor(lc.mode) if lc.floor_preset else CdvsParams.for_mode(lc.mode)
-    return cdvs_loop_detector(lc.mode, params, config.database_params(), model=model, camera=camera, gate=gate)
+    return cdvs_loop_detector(lc.mode, params, config.database_params(camera), model=model, camera=camera, gate=gate)
 
 
 def vocab_detector(config: PipelineConfig, camera: CameraModel | None = None,
@@ -45,7 +45,7 @@ def vocab_detector(config: PipelineConfig, camera: CameraModel | None = None,
     params = dataclasses.replace(params, n_features=vc.n_features, min_shared_words=vc.min_shared_words)
     verify = VerifyParams(ratio=vc.ratio, min_inliers=vc.min_inliers, threshold_px=vc.threshold_px,
                           geometry=GeometryModel.SIMILARITY, scale_range=FLOOR_SCALE_RANGE)
-    return LoopDetector(VocabRecognizer(tree, params), VocabVerifier(verify), config.database_params(), camera=camera,
+    return LoopDetector(VocabRecognizer(tree, params), VocabVerifier(verify), config.database_params(camera), camera=camera,
                         gate=gate)
 
 
