@@ -670,10 +670,11 @@ class VisualOdometry:
                 # a poor prediction (slip, failed frames in between): the same start with a wider capture range
                 out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep, h_ref=h_ref)
                 method = Method.LK_PYRAMID
-        if out[0] is None and cv is not None and self._gate is not None:   # (without a fallback cv was the start)
+        if out[0] is None and cv is not None and self._gate is not None and cv[1] <= 0.5 * c.lk_window:
             # the prediction (wheel odometry) missed by more than LK's capture range, e.g. in a wheel slip: the
             # motion vision measured on the previous frame is a start within a few pixels at high frame rates
-            # (one LK pass, instead of ORB on both images)
+            # (one LK pass, instead of ORB on both images). Not at low rates (without a fallback cv was the start;
+            # with one, its bound is beyond LK's capture range: a start LK may settle wrongly from)
             out, method = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, cv[0], h_ref=h_ref), Method.LK
         if out[0] is not None and out[0].n_inliers < c.lk_weak_inliers and keyframe is not None and c.descriptors \
                 and not self._holds(out[0].delta, cv) \
