@@ -252,6 +252,18 @@ class VOConfig(Config):
     # (tests/vslam/test_backend_drift.py) - see docs/odometry.md, item 11
     aperture_weighting: bool = setting(False, doc="weigh each LK point's residual by the shape of its structure "
                                                   "tensor in the tilt refinement (needs refine_tilt)")
+    # the motion vision measured on the previous frame, at constant velocity, is known to within what the robot
+    # can accelerate in one frame time: at high frame rates a few pixels, often better than the wheel odometry
+    # (on our simulator's 1 m/s carpet loop the fused wheel/gyro motion is off by ~5 mm forward and ~4 mm sideways
+    # per frame, 4-5 px, up to 30 px in a slip). It is a second LK start when LK from the prediction fails, and
+    # a weak LK fit that agrees with it needs no descriptor check (see VisualOdometry._holds); at low frame rates
+    # its uncertainty (growing as dt^2) exceeds LK's capture range and it is not used
+    prediction_accel: float = setting(2.0, range="[0, inf)", unit="m/s^2",
+                                      doc="acceleration allowed for in the constant-velocity motion (hard braking "
+                                          "of a ground robot); 0: no constant-velocity start or check")
+    prediction_angular_accel: float = setting(4.0, range="(0, inf)", unit="rad/s^2",
+                                              doc="the same for the turn rate (1 m/s^2 of wheel-speed difference "
+                                                  "across a 0.5 m track)")
     seed: int = setting(0, range="[0, inf)")
 
     def check(self) -> None:
@@ -312,13 +324,22 @@ class VOEstimate:
         return self.matches[self.inliers]
 
 
-@dataclass(frozen=True)
 class _Images:
     """A frame prepared for LK: `fine` is photometrically normalised for precise single-level tracking; `coarse`
-    keeps the low frequencies (gain/offset normalised only) that the coarse levels of a deep pyramid need."""
+    keeps the low frequencies (gain/offset normalised only) that the coarse levels of a deep pyramid need. Only
+    the retries (pyramid, phase correlation, ORB) use `coarse`, so it is computed on first use (~0.1 ms a frame
+    at high rates, where most frames need none)."""
 
-    fine: np.ndarray
-    coarse: np.ndarray
+    __slots__ = ("fine", "_gray", "_coarse")
+
+    def __init__(self, fine: np.ndarray, gray: np.ndarray | None = None, coarse: np.ndarray | None = None) -> None:
+        self.fine, self._gray, self._coarse = fine, gray, coarse
+
+    @property
+    def coarse(self) -> np.ndarray:
+        if self._coarse is None:
+            self._coarse, self._gray = normalize(self._gray), None
+        return self._coarse
 
 
 @dataclass
@@ -356,6 +377,7 @@ class VisualOdometry:
         self._covs: list[np.ndarray] = []         # covariance of each frame's delta (for re-acquisition)
         self._last_t: float | None = None
         self._velocity: np.ndarray | None = None  # last measured motion per second
+        self._velocity_fresh = False              # it was measured on the previous frame
         self._kf: _Keyframe | None = None
         self._t_kp = np.zeros(3)                  # pose of the previous frame in the keyframe frame
         self._c_kp = np.zeros((3, 3))             # its full covariance
@@ -374,6 +396,7 @@ class VisualOdometry:
         self._frame_orb_dense: Features | None = None  # its dense-retry ORB features, when computed
         self._dense_pass = False                  # the descriptor path matches the dense ORB sets (_dense_retry)
         self._gate: tuple[np.ndarray, np.ndarray] | None = None  # fallback motion since the previous frame + cov
+        self._cv: tuple[np.ndarray, float] | None = None  # constant-velocity motion since then, bound in px
         # camera heights (odometry.height) of the previous frame and of the frame being processed
         self._height = Height(camera.camera_height)
         self._frame_height = self._height
@@ -438,6 +461,7 @@ class VisualOdometry:
         # descriptor motions are checked against the fallback motion when there is one (wheel odometry): a
         # constant-velocity guess says nothing at a turn, so without a fallback there is no gate
         self._gate = (pred, pred_cov * self.config.fallback_inflation) if fallback is not None else None
+        self._cv = self._constant_velocity(dt)
         est = None
         if gray is not None and self._kf is not None:
             est = self._match_keyframe(gray, index, timestamp, dt, pred)
@@ -478,12 +502,14 @@ class VisualOdometry:
 
     def _prepare(self, gray: np.ndarray) -> _Images:
         mode, radius = self.config.photometric, self.config.photometric_radius
-        coarse = normalize(gray)
         if mode == Photometric.LOCAL:
-            return _Images(normalize_local(gray, radius), coarse)
+            return _Images(normalize_local(gray, radius), gray)
         if mode == Photometric.HIGHPASS:
-            return _Images(highpass(gray, radius), coarse)
-        return _Images(coarse if mode == Photometric.GLOBAL else gray, coarse)
+            return _Images(highpass(gray, radius), gray)
+        if mode == Photometric.GLOBAL:
+            coarse = normalize(gray)
+            return _Images(coarse, coarse=coarse)
+        return _Images(gray, gray)
 
     def _prediction(self, dt: float, fallback) -> tuple[np.ndarray, np.ndarray]:
         c = self.config
@@ -492,6 +518,32 @@ class VisualOdometry:
         # without any motion source the guess is "no motion", flagged by self._predicted = False
         pred = self._velocity * dt if self._velocity is not None else np.zeros(3)
         return pred, np.diag([c.lost_sigma_xy ** 2, c.lost_sigma_xy ** 2, c.lost_sigma_theta ** 2])
+
+    def _constant_velocity(self, dt: float | None) -> tuple[np.ndarray, float] | None:
+        """The motion since the previous frame at the velocity vision measured on it, and the most it can be off in
+        pixels (at the image edge) given `VOConfig.prediction_accel`; None when the previous frame was not measured
+        by vision."""
+        c = self.config
+        if not self._velocity_fresh or dt is None or c.prediction_accel <= 0:
+            return None
+        bound = 0.5 * dt * dt * (c.prediction_accel / self._m_per_px
+                                 + c.prediction_angular_accel * 0.5 * max(self.camera.size))
+        return self._velocity * dt, bound
+
+    def _holds(self, t_kc: np.ndarray, cv_kc: tuple[np.ndarray, float] | None) -> bool:
+        """An LK fit t_kc agrees with the constant-velocity motion `cv_kc` (keyframe -> frame, bound in pixels)
+        while that motion is itself known to within LK's capture range (half its window): the fit is where the
+        robot can be, so it is no wrong settle on a self-similar floor and needs no descriptor check (at high
+        frame rates; at low ones the bound exceeds the capture range)."""
+        if cv_kc is None:
+            return False
+        c = self.config
+        mean, bound = cv_kc
+        if bound > 0.5 * c.lk_window:
+            return False
+        d = t_kc - mean
+        off = math.hypot(d[0], d[1]) / self._m_per_px + abs(wrap_angle(d[2])) * 0.5 * max(self.camera.size)
+        return off <= bound + c.orb_threshold_px
 
     def _start_keyframe(self, gray: _Images, index: int, timestamp: float,
                         reason_out: VOEstimate | None = None) -> bool:
@@ -526,9 +578,13 @@ class VisualOdometry:
     def _floor(self, xn: np.ndarray, height: Height | None) -> np.ndarray:
         """Floor points of rays for the camera at a height (nominal: `CameraModel.rays_to_floor`)."""
         h = self._abs_height(height)
+        floor = self.camera.rays_to_floor(xn)
         if h == self.camera.camera_height:
-            return self.camera.rays_to_floor(xn)
-        return self.camera.rays_to_floor_batch(xn, [h], [self.camera.tilt])[0]
+            return floor
+        # each viewing ray meets the floor at a distance proportional to the camera height: the same points scaled
+        # about the camera's footprint (the mount), ~7x cheaper than the general `rays_to_floor_batch`
+        mount = np.asarray(self.camera.mount[:2])
+        return mount + (floor - mount) * (h / self.camera.camera_height)
 
     def _fit(self, cur_xn: np.ndarray, ref_xn: np.ndarray, cur_floor: np.ndarray, ref_floor: np.ndarray,
              threshold_px: float | None = None, min_inliers: int | None = None,
@@ -583,7 +639,9 @@ class VisualOdometry:
         visible = (guess[:, 0] > -m) & (guess[:, 0] < w + m) & (guess[:, 1] > -m) & (guess[:, 1] < h + m)
         ref_px, ref_xn, ref_floor, guess = ref_px[visible], ref_xn[visible], ref_floor[visible], guess[visible]
         fine, coarse, back = gray.fine, gray.coarse, None
-        if shift is None and len(guess) >= 2:
+        # the image content turns by about the floor rotation (exactly, for an untilted camera): skip measuring it
+        # when that is far below the derotation threshold (a Kabsch fit per frame at high rates)
+        if shift is None and len(guess) >= 2 and abs(wrap_angle(t_ref_cur[2])) > 0.5 * c.lk_max_rotation:
             phi = kabsch_2d(ref_px, guess)[2]   # rotation of the image content, reference -> current
             if abs(phi) > c.lk_max_rotation:
                 fwd, back = _derotation(phi, (self.camera.cx, self.camera.cy))
@@ -615,9 +673,11 @@ class VisualOdometry:
             self._tensor_cache = (ref_gray, structure_tensors(ref_gray.fine, self.config.lk_window))
         return self._tensor_cache[1]
 
-    def _measure(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, keyframe=None, gate=None, h_ref=None):
+    def _measure(self, ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, keyframe=None, gate=None, h_ref=None,
+                 cv=None):
         """The motion from a reference frame, trying in turn: LK from the prediction (the fast path), LK with a
-        deep pyramid from it, ORB matches against the keyframe refined by LK (any rotation, large shifts; only
+        deep pyramid from it, LK from the constant-velocity motion `cv` (motion reference -> frame, bound in px)
+        when there is one, ORB matches against the keyframe refined by LK (any rotation, large shifts; only
         for a `keyframe`), LK from a phase-correlation shift, and without a prediction LK from no motion.
         Returns ((fit, ref_px, cur_px, inliers), Method)."""
         c = self.config
@@ -633,7 +693,14 @@ class VisualOdometry:
                 # a poor prediction (slip, failed frames in between): the same start with a wider capture range
                 out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep, h_ref=h_ref)
                 method = Method.LK_PYRAMID
+        if out[0] is None and cv is not None and self._gate is not None and cv[1] <= 0.5 * c.lk_window:
+            # the prediction (wheel odometry) missed by more than LK's capture range, e.g. in a wheel slip: the
+            # motion vision measured on the previous frame is a start within a few pixels at high frame rates
+            # (one LK pass, instead of ORB on both images). Not at low rates (without a fallback cv was the start;
+            # with one, its bound is beyond LK's capture range: a start LK may settle wrongly from)
+            out, method = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, cv[0], h_ref=h_ref), Method.LK
         if out[0] is not None and out[0].n_inliers < c.lk_weak_inliers and keyframe is not None and c.descriptors \
+                and not self._holds(out[0].delta, cv) \
                 and out[0].n_inliers < c.lk_weak_visible_fraction * self._visible(keyframe, out[0].delta):
             # few corners tracked from the prediction: at a low frame rate the prediction (constant velocity) is a
             # guess, and on a self-similar floor LK can settle at a wrong place with 20-35 consistent corners
@@ -739,6 +806,17 @@ class VisualOdometry:
         w, h = self.camera.size
         return int(((px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)).sum())
 
+    def _stay_in_view(self, px: np.ndarray, step: np.ndarray, count: int) -> bool:
+        """At least `count` of the pixels `px` stay in the image when the view moves once more by `step` (the
+        motion since the previous frame): those farther from the border than that motion's image shift (1.5x the
+        central ground resolution's: lens distortion, tilt), plus its rotation at the image corners. A lower bound
+        on `_visible` at the next frame in a few array operations (projecting every keyframe corner costs ~100 us
+        per frame at high rates, where it almost never renews the keyframe)."""
+        w, h = self.camera.size
+        d = 1.5 * math.hypot(step[0], step[1]) / self._m_per_px + abs(step[2]) * 0.5 * math.hypot(w, h) + 2.0
+        inside = (px[:, 0] >= d) & (px[:, 0] < w - 1 - d) & (px[:, 1] >= d) & (px[:, 1] < h - 1 - d)
+        return int(inside.sum()) >= count
+
     def _in_gate(self, fit: RigidFit, t_pred: np.ndarray, cov: np.ndarray) -> bool:
         c = self.config
         e = fit.delta - t_pred
@@ -757,9 +835,10 @@ class VisualOdometry:
     def _match_keyframe(self, gray, index, timestamp, dt, pred) -> VOEstimate | None:
         kf = self._kf
         t_kc_pred = compose(self._t_kp, pred) if self._predicted else None
-        gate = None if self._gate is None else (t_kc_pred, self._c_kp + self._gate[1])
+        gate = None if self._gate is None else (compose(self._t_kp, self._gate[0]), self._c_kp + self._gate[1])
+        cv = None if self._cv is None else (compose(self._t_kp, self._cv[0]), self._cv[1])
         (fit, ref_px, cur_px, inl), method = self._measure(kf.gray, kf.pts, kf.xn, kf.floor, gray, t_kc_pred,
-                                                           keyframe=kf, gate=gate, h_ref=kf.height)
+                                                           keyframe=kf, gate=gate, h_ref=kf.height, cv=cv)
         if fit is None:
             return None
         tilt = self.config.refine_tilt  # the fit's covariance already covers the wobble
@@ -785,7 +864,8 @@ class VisualOdometry:
         # chained 1.7x the keyframes (100 m carpet: 524 vs 317, VO end error 14.0 vs 5.8 cm)
         renew = (method not in (Method.LK, Method.LK_PYRAMID) or n_in < c.keyframe_min_inliers
                  or n_in < c.keyframe_min_fraction * len(kf.pts) or abs(fit.delta[2]) > c.keyframe_max_rotation
-                 or self._visible(kf, compose(fit.delta, delta)) < c.keyframe_min_inliers)
+                 or (not self._stay_in_view(cur_px[inl], delta, c.keyframe_min_inliers)
+                     and self._visible(kf, compose(fit.delta, delta)) < c.keyframe_min_inliers))
         if renew and self._start_keyframe(gray, index, timestamp):
             est.is_keyframe = True
         return est
@@ -796,7 +876,7 @@ class VisualOdometry:
         prev_xn = self.camera.normalize(prev_px)
         h = self._height
         (fit, ref_px, cur_px, _), method = self._measure(self._prev_gray, prev_px, prev_xn, self._floor(prev_xn, h),
-                                                         gray, pred if self._predicted else None, h_ref=h)
+                                                         gray, pred if self._predicted else None, h_ref=h, cv=self._cv)
         if fit is None and c.descriptors:
             # descriptors against the previous frame, with corners of its own: the keyframe corners it tracked sit
             # where it overlapped the keyframe, often not where it overlaps this frame (a low rate)
@@ -805,7 +885,7 @@ class VisualOdometry:
             xn = self.camera.normalize(pts)
             prev = _Keyframe(index=index - 1, timestamp=timestamp - dt, gray=self._prev_gray, pts=pts, xn=xn,
                              floor=self._floor(xn, h), height=h)
-            gate = None if self._gate is None else (pred, self._gate[1])
+            gate = None if self._gate is None else self._gate
             (fit, ref_px, cur_px, _), method = self._descriptor_match(prev, gray, pred if self._predicted else None,
                                                                       gate)
         if fit is None:
@@ -927,10 +1007,12 @@ class VisualOdometry:
         self._height = self._frame_height
         if self.config.track_height:
             self.heights.observe(timestamp, self._height)
+        self._velocity_fresh = False
         if est.status == VOStatus.OK:
             self._failures = 0
             if dt and est.reference != Reference.REACQUIRED:  # a re-attachment jump is no velocity
                 self._velocity = est.delta / dt
+                self._velocity_fresh = True
         self._last_t = timestamp
         self._prev_gray = gray
 
