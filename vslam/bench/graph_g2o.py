@@ -34,13 +34,15 @@ class PeerCrashed(RuntimeError):
 
 
 def solve_in_child(dim: int, init: np.ndarray, a: np.ndarray, b: np.ndarray, z: np.ndarray, info: np.ndarray,
-                   is_loop: np.ndarray, anchors: np.ndarray, phi: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """(poses, per-loop DCS chi^2, seconds inside the child) of g2o LM + DCS, solved in a child process."""
+                   is_loop: np.ndarray, anchors: np.ndarray, phi: float, module: str = "vslam.bench.graph_g2o"
+                   ) -> tuple[np.ndarray, np.ndarray, float]:
+    """(poses, per-loop DCS chi^2, seconds inside the child) of g2o LM + DCS, solved in a child process running
+    `python -m module IN OUT` (this module; tests substitute one that crashes)."""
     with tempfile.TemporaryDirectory(prefix="vslam-g2o-") as tmp:
         src, dst = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
         np.savez(src, dim=dim, init=init, a=a, b=b, z=z, info=info, is_loop=is_loop, anchors=anchors, phi=phi)
         try:
-            proc = subprocess.run([sys.executable, "-m", "vslam.bench.graph_g2o", str(src), str(dst)],
+            proc = subprocess.run([sys.executable, "-m", module, str(src), str(dst)],
                                   capture_output=True, text=True, timeout=G2O_TIMEOUT_S,
                                   env={**os.environ, "OMP_NUM_THREADS": "1"})
         except subprocess.TimeoutExpired as e:
