@@ -56,6 +56,16 @@ def solve_in_child(dim: int, init: np.ndarray, a: np.ndarray, b: np.ndarray, z: 
         return out["poses"], out["chi2"], float(out["seconds"])
 
 
+def g2o_information(dim: int, info: np.ndarray) -> np.ndarray:
+    """The project's information matrices (file order; GTSAM reads the 3D rotation block per radian of rotation
+    vector) in g2o's 3D error units: EdgeSE3's rotation error is the quaternion's vector part, half the rotation
+    vector for small angles, so the rotation rows and columns scale by 2 and both libraries solve one problem."""
+    if dim == 2:
+        return info
+    s = np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
+    return info * s[:, None] * s[None, :]
+
+
 def _solve(d: dict) -> tuple[np.ndarray, np.ndarray]:
     # imported only in the child: the optional wheel may be absent, and a crash in it must not take the bench down
     import g2opy as g2o
@@ -77,7 +87,8 @@ def _solve(d: dict) -> tuple[np.ndarray, np.ndarray]:
         opt.add_vertex(v)
         keep.append(v)
     loops = []
-    for i, j, z, info, lp in zip(d["a"].tolist(), d["b"].tolist(), d["z"].tolist(), d["info"], d["is_loop"].tolist()):
+    infos = g2o_information(dim, d["info"])
+    for i, j, z, info, lp in zip(d["a"].tolist(), d["b"].tolist(), d["z"].tolist(), infos, d["is_loop"].tolist()):
         e = g2o.EdgeSE2() if dim == 2 else g2o.EdgeSE3()
         e.set_vertex(0, opt.vertex(int(i)))
         e.set_vertex(1, opt.vertex(int(j)))
