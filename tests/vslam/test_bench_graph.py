@@ -12,7 +12,7 @@ from graph import GraphParams, optimize, write_graph
 from graph.batch import build, initial_guess
 from graph.params import InitMethod
 from tests.graph.synth import noisy_graph, square_laps
-from vslam.bench import graph_methods, graph_rows
+from vslam.bench import graph_methods, graph_rows, graph_tables
 from vslam.bench.graph_g2o import PeerCrashed, solve_in_child
 from vslam.bench.graph_reference import converged_reference
 from vslam.cli.main import main
@@ -158,3 +158,25 @@ def test_g2o_peer_without_kernel_reaches_gtsams_least_squares_optimum():
     plain = optimize(data, GraphParams.preset("least_squares"))
     assert np.abs(poses[:, :2] - plain.poses[:, :2]).max() < 1e-4
     assert len(chi2) == data.num_loops and np.all(chi2 < 30)
+
+
+def _row(method, fraction, ate, kept=1.0, rejected=1.0, seed=2, policy="random", **kw):
+    return {"graph": "g", "policy": policy if fraction else "-", "fraction": fraction, "seed": seed,
+            "method": method, "status": "ok", "ate": ate, "true_kept": kept, "false_rejected": rejected, "s": 1.0,
+            "version": "v", **kw}
+
+
+def test_target_line_names_each_missed_row_and_by_how_much():
+    head = {"graph": "g", "nodes": 10, "loops": 5, "dim": 2, "reference": "ground truth", "ref_ate": 1.0,
+            "ref_iterations": 4, "ref_s": 0.1, "clean_ate": 1.0, "clean_ate_opt": 0.0, "clean_s": 0.1}
+    rows = [_row("ours", 0.0, 1.0), _row("ours", 0.3, 1.05), _row("ours", 0.3, 1.2, seed=5),   # worst seed: 1.2
+            _row("ours", 0.5, 1.0, rejected=0.98), _row("dcs", 0.5, 0.9), _row("ours", 0.8, 9.0)]
+    text = graph_tables.tables({"g": head}, rows, "v")
+    line = text.splitlines()[-1]
+    assert "2 row(s) miss" in line
+    assert "random 30 %: ATE 1.2 > 1.06 m (+14.0 cm)" in line
+    assert "false rejected 98.0 % < 99 %" in line and "ATE 1 > DCS (GTSAM) 0.9 m" in line
+    assert "stretch" in text                          # 80 %: shown, not judged
+    met = graph_tables.tables({"g": head}, [r for r in rows if r["fraction"] in (0.0, 0.8)], "v")
+    assert met.splitlines()[-1] == "**g**: every row met the targets."
+    assert "(stale)" in graph_tables.tables({"g": head}, [_row("ours", 0.0, 1.0, version="old")], "v")
