@@ -180,3 +180,12 @@ def test_target_line_names_each_missed_row_and_by_how_much():
     met = graph_tables.tables({"g": head}, [r for r in rows if r["fraction"] in (0.0, 0.8)], "v")
     assert met.splitlines()[-1] == "**g**: every row met the targets."
     assert "(stale)" in graph_tables.tables({"g": head}, [_row("ours", 0.0, 1.0, version="old")], "v")
+
+
+def test_priority_order_puts_each_method_clean_then_fifty_percent_first():
+    tasks = graph_rows.plan(["a", "b"], {"a": 10, "b": 10}, ["random", "local"], [0, 0.1, 0.3, 0.5, 0.7], [2],
+                            ["ours", "dcs"], 100)
+    order = graph_rows.priority_order(tasks, ["ours", "dcs"])
+    assert sorted(order, key=repr) == sorted(tasks, key=repr)
+    assert [(t.method, t.fraction) for t in order[:6]] == [("ours", 0.0)] * 2 + [("ours", 0.5)] * 4
+    assert order[len(order) // 2].method == "dcs" and order[-1].fraction == 0.7

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 from vslam.bench import graph_methods
+from vslam.bench import graph_rows as rows_
 from vslam.bench.graph_data import QUICK_GRAPHS, TUNING_GRAPHS, TUNING_SEEDS, datasets
 from vslam.bench.graph_outliers import POLICIES
 from vslam.bench.graph_rows import RowStore, code_version, execute, graph_heads, head, log, plan, row_key
@@ -59,6 +60,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "rows already there (the converged references are cached in its folder, graph-reference/)")
     p.add_argument("--jobs", type=int, default=1, help="rows solved in this many processes (one graph in memory "
                                                        "each; timings are then under each other's load)")
+    p.add_argument("--order", choices=("graph", "priority"), default="graph",
+                   help="graph: graph by graph; priority: method by method in --methods order, each over every "
+                        "graph at 0, 50, 30, 10 %% false loops, stretch last (a run cut short keeps the telling rows)")
     p.add_argument("--redo-stale", action="store_true",
                    help="redo rows made by another code version (default: keep them, marked stale in the tables)")
 
@@ -133,6 +137,8 @@ def run(args: argparse.Namespace) -> BenchResult:
     nodes = {g: store.graphs[g]["nodes"] for g in present}
     tasks = plan(present, nodes, policies, fractions, seeds, methods, args.peer_max_nodes)
     todo = [t for t in tasks if not store.done(t, version) and (args.redo_stale or not store.present(t))]
+    if args.order == "priority":
+        todo = rows_.priority_order(todo, methods)
     log(f"{len(tasks)} rows selected, {len(tasks) - len(todo)} already in {out}, {len(todo)} to solve "
         f"({args.jobs} job(s))")
 
