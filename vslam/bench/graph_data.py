@@ -18,8 +18,8 @@ from vslam.paths import shared_data_dir
 
 # graphs the robust method was tuned on (docs/graph.md); every other graph is reporting only
 TUNING_GRAPHS = ("ring", "intel")
-# the seed of the false loops the defaults were tuned with; other seeds are reporting draws
-TUNING_SEEDS = (1,)
+# the seeds of the false loops the defaults were tuned with (stop 22: ring and intel draws 1, 3); other seeds report
+TUNING_SEEDS = (1, 3)
 QUICK_GRAPHS = ("ring", "CSAIL")
 
 
