@@ -175,11 +175,15 @@ def test_target_line_names_each_missed_row_and_by_how_much():
     line = text.splitlines()[-1]
     assert "2 row(s) miss" in line
     assert "random 30 %: ATE 1.2 > 1.06 m (+14.0 cm)" in line
-    assert "false rejected 98.0 % < 99 %" in line and "ATE 1 > DCS (GTSAM) 0.9 m" in line
+    assert "wrong loops rejected 98.0 % < 99 %" in line and "ATE 1 > DCS (GTSAM) 0.9 m" in line
     assert "stretch" in text                          # 80 %: shown, not judged
     met = graph_tables.tables({"g": head}, [r for r in rows if r["fraction"] in (0.0, 0.8)], "v")
     assert met.splitlines()[-1] == "**g**: every row met the targets."
     assert "(stale)" in graph_tables.tables({"g": head}, [_row("ours", 0.0, 1.0, version="old")], "v")
+    # the kept injected loops all state the truth (graph.labels): judged on the wrong ones, the row is met
+    agree = [_row("ours", 0.0, 1.0), _row("ours", 0.5, 1.0, rejected=0.98, wrong_rejected=1.0)]
+    text = graph_tables.tables({"g": head}, agree, "v")
+    assert text.splitlines()[-1] == "**g**: every row met the targets." and "(100.0 of wrong)" in text
 
 
 def test_priority_order_puts_each_method_clean_then_fifty_percent_first():
