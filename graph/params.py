@@ -142,6 +142,11 @@ class RobustParams(Config):
                                       "over the short odometry cycle between them (graph.support); 0: off")
     support_probability: float = setting(0.99, range="(0, 1)", unit="probability",
                                          doc="chi-square quantile of that cycle test")
+    support_propagate: bool = setting(False, unit="flag",
+                                      doc="3D cycle test: propagate the measurements' covariances through the cycle "
+                                          "(rotation noise x lever arm) instead of summing them; fixes sphere2500 "
+                                          "local 50 % (0.93 -> 0.21 m) but rejects 38 true loops of clean garage "
+                                          "(3 summed), so off by default (docs/graph.md, issue 14)")
     calibration_margin: float = setting(10.0, range="[0, inf)", unit="x variance factor",
                                         doc="loop thresholds = chi-square quantile x this x the variance factor of "
                                             "the agreeing cycles (graph.support; public graphs state noise 10-1000x "

@@ -233,7 +233,8 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     base_graph = graph_of(base)
     t0 = time.perf_counter()
     # 1. local consistency
-    pairs = loop_support(data, params.robust.support_window, float(chi2.ppf(params.robust.support_probability, dof)))
+    pairs = loop_support(data, params.robust.support_window, float(chi2.ppf(params.robust.support_probability, dof)),
+                         propagate=params.robust.support_propagate)
     label = clusters(L, pairs[0], pairs[1]) if (L and params.robust.cluster_weights) else np.arange(L)
     supported = np.zeros(L, bool)
     supported[pairs[0]] = True
