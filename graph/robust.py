@@ -32,6 +32,7 @@ from graph.kernel_start import dcs_solve, tls_descent
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.polish import polish
+from graph.readmit import readmit_dropped
 from graph.result import GraphResult
 from graph.support import clusters, loop_support, revisits
 from graph.thresholds import loop_thresholds
@@ -339,6 +340,12 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         new_inlier = np.zeros(L, bool)
         new_inlier[pool] = kept
         if tls_objective(base_graph, built, v, c2) <= tls_objective(base_graph, built, values, c2):
+            # the trial may push out a loop kept so far (a false trial loop pulls through GNC's surrogate):
+            # one joint re-solve with those back (graph.readmit)
+            v, new_inlier, it = readmit_dropped(built, v, new_inlier, inlier, c2,
+                                                lambda x: tls_objective(base_graph, built, x, c2),
+                                                lambda g, x, n: _lm(g, x, params, n), params, notes)
+            iters += it
             values, inlier = v, new_inlier
             notes.append(f"{int(trial.sum())} unsupported loops tried jointly: {int((kept & trial[pool]).sum())} kept")
         values, inlier, it = _readmit(built, values, inlier, c2, params, notes)
