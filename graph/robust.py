@@ -32,7 +32,7 @@ from graph.kernel_start import dcs_solve, tls_descent
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.polish import polish
-from graph.readmit import readmit_dropped
+from graph.readmit import readmit_dropped, readmit_supported
 from graph.result import GraphResult
 from graph.support import clusters, loop_support, revisits
 from graph.thresholds import loop_thresholds
@@ -350,6 +350,11 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             notes.append(f"{int(trial.sum())} unsupported loops tried jointly: {int((kept & trial[pool]).sum())} kept")
         values, inlier, it = _readmit(built, values, inlier, c2, params, notes)
         iters += it
+    # a rejected loop that agrees with a kept one may fit only once it is in (graph.readmit)
+    values, inlier, it = readmit_supported(built, values, inlier, pairs[0], pairs[1], c2,
+                                           lambda x: tls_objective(base_graph, built, x, c2),
+                                           lambda g, x, n: _lm(g, x, params, n), params, notes)
+    iters += it
     t_polish = time.perf_counter()
     # 5. the loop set is decided: converge the map on it (graph.polish; LM stopped at its cost tolerance)
     values, it, why = polish(built.graph(inlier), values, data.dim, params)
