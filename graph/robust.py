@@ -351,9 +351,17 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         values, inlier, it = _readmit(built, values, inlier, c2, params, notes)
         iters += it
     # a rejected loop that agrees with a kept one may fit only once it is in (graph.readmit)
+    def judge(mask: np.ndarray, v0: gtsam.Values):
+        # GNC over the candidates only; odometry, anchor and the kept loops are known inliers
+        known = base + [f for f, k in zip(built.loops, inlier.tolist()) if k]
+        v, ok, _, n = gnc_tls(known, built.subset(mask), v0, c2[mask], np.arange(int(mask.sum())), params)
+        out = np.zeros(L, bool)
+        out[np.flatnonzero(mask)[ok]] = True
+        return v, out, n
+
     values, inlier, it = readmit_supported(built, values, inlier, pairs[0], pairs[1], c2,
                                            lambda x: tls_objective(base_graph, built, x, c2),
-                                           lambda g, x, n: _lm(g, x, params, n), params, notes)
+                                           lambda g, x, n: _lm(g, x, params, n), judge, params, notes)
     iters += it
     t_polish = time.perf_counter()
     # 5. the loop set is decided: converge the map on it (graph.polish; LM stopped at its cost tolerance)
