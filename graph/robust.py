@@ -32,6 +32,7 @@ from graph.kernel_start import dcs_solve, tls_descent
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.polish import polish
+from graph.readmit import readmit_dropped, readmit_supported
 from graph.result import GraphResult
 from graph.support import clusters, loop_support, revisits
 from graph.thresholds import loop_thresholds
@@ -340,10 +341,29 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         new_inlier = np.zeros(L, bool)
         new_inlier[pool] = kept
         if tls_objective(base_graph, built, v, c2) <= tls_objective(base_graph, built, values, c2):
+            # the trial may push out a loop kept so far (a false trial loop pulls through GNC's surrogate):
+            # one joint re-solve with those back (graph.readmit)
+            v, new_inlier, it = readmit_dropped(built, v, new_inlier, inlier, c2,
+                                                lambda x: tls_objective(base_graph, built, x, c2),
+                                                lambda g, x, n: _lm(g, x, params, n), params, notes)
+            iters += it
             values, inlier = v, new_inlier
             notes.append(f"{int(trial.sum())} unsupported loops tried jointly: {int((kept & trial[pool]).sum())} kept")
         values, inlier, it = _readmit(built, values, inlier, c2, params, notes)
         iters += it
+    # a rejected loop that agrees with a kept one may fit only once it is in (graph.readmit)
+    def judge(mask: np.ndarray, v0: gtsam.Values):
+        # GNC over the candidates only; odometry, anchor and the kept loops are known inliers
+        known = base + [f for f, k in zip(built.loops, inlier.tolist()) if k]
+        v, ok, _, n = gnc_tls(known, built.subset(mask), v0, c2[mask], np.arange(int(mask.sum())), params)
+        out = np.zeros(L, bool)
+        out[np.flatnonzero(mask)[ok]] = True
+        return v, out, n
+
+    values, inlier, it = readmit_supported(built, values, inlier, pairs[0], pairs[1], c2,
+                                           lambda x: tls_objective(base_graph, built, x, c2),
+                                           lambda g, x, n: _lm(g, x, params, n), judge, params, notes)
+    iters += it
     t_polish = time.perf_counter()
     # 5. the loop set is decided: converge the map on it (graph.polish; LM stopped at its cost tolerance)
     values, it, why = polish(built.graph(inlier), values, data.dim, params)
