@@ -10,7 +10,6 @@ time and by the reference settings, so a resumed run reuses them.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ import numpy as np
 
 from graph import GraphParams, optimize
 from graph.model import PoseGraphData
-from odometry.shared.atomic_io import atomic_write_bytes
+from odometry.shared.atomic_io import atomic_path
 
 REF_TOL = 1e-12            # relative and absolute error decrease (gtsam error units): far below any solver noise
 REF_MAX_ITERATIONS = 2000  # the largest graph here converges in well under this (iterations are reported)
@@ -55,14 +54,7 @@ def converged_reference(name: str, path: Path, data: PoseGraphData, cache_dir: P
     res = optimize(data, reference_params())
     ref = Reference(res.poses, int(res.iterations), float(res.final_cost), float(res.seconds))
     if cached is not None:
-        cached.parent.mkdir(parents=True, exist_ok=True)
-        buf = _npz_bytes(key=key, poses=ref.poses, iterations=ref.iterations, final_cost=ref.final_cost,
-                         seconds=ref.seconds)
-        atomic_write_bytes(cached, buf)
+        with atomic_path(cached) as tmp:
+            np.savez(tmp, key=key, poses=ref.poses, iterations=ref.iterations, final_cost=ref.final_cost,
+                     seconds=ref.seconds)
     return ref
-
-
-def _npz_bytes(**arrays) -> bytes:
-    b = io.BytesIO()
-    np.savez(b, **arrays)
-    return b.getvalue()
