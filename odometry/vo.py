@@ -294,6 +294,8 @@ class VOEstimate:
         inliers: (M,) bool RANSAC inlier mask over `matches`.
         reason: why vision failed ("" when it did not).
         fit_seconds: time spent in the robust fit (RANSAC + Kabsch), part of the step's time.
+        orb_images: images whose ORB features were computed for this frame (the frame, its keyframe; ~30 ms each):
+            0 on the LK fast path, also when a weak LK fit needed no descriptor check.
     """
 
     index: int
@@ -317,6 +319,7 @@ class VOEstimate:
     inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     reason: str = ""
     fit_seconds: float = 0.0
+    orb_images: int = 0
 
     @property
     def inlier_matches(self) -> np.ndarray:
@@ -386,6 +389,7 @@ class VisualOdometry:
         self._prev_px: np.ndarray | None = None   # tracked keyframe corners in the previous frame (inliers)
         self._failures = 0                        # consecutive frames vision could not measure
         self._fit_seconds = 0.0
+        self._orb_images = 0                      # ORB extractions for the frame being processed
         self._predicted = False
         # re-acquisition: recent keyframes whose poses belong to the trajectory, and whether the current keyframe
         # chain does (a keyframe restarted after a loss starts from a guessed pose until it is re-attached)
@@ -424,6 +428,7 @@ class VisualOdometry:
         timestamp = float(timestamp)
         index = len(self._poses)
         self._fit_seconds = 0.0
+        self._orb_images = 0
         self._frame_orb = None
         self._frame_orb_dense = None
         self._frame_height = self._height
@@ -726,6 +731,7 @@ class VisualOdometry:
 
     def _orb(self, images: _Images, dense: bool = False) -> Features:
         c = self.config
+        self._orb_images += 1
         if dense:
             return orb_features(images.coarse, c.orb_dense_features, c.orb_dense_fast_threshold, c.border)
         return orb_features(images.coarse, c.orb_features, c.orb_fast_threshold, c.border)
@@ -1000,6 +1006,7 @@ class VisualOdometry:
 
     def _finish(self, est: VOEstimate, gray, timestamp: float, dt: float | None) -> None:
         est.fit_seconds = self._fit_seconds
+        est.orb_images = self._orb_images
         prev = self._poses[-1] if self._poses else np.zeros(3)
         est.pose = compose(prev, est.delta) if self._poses else np.zeros(3)
         self._poses.append(est.pose)
@@ -1047,7 +1054,8 @@ class VOTrajectory:
 
     poses (N, 3) start at the origin; deltas (N, 3) with deltas[0] = 0; covariances (N, 3, 3) of the deltas;
     status (N,) VOStatus values; method (N,) Method values (how each frame was matched); vo_seconds /
-    image_seconds (N,) time of the VO step and of fetching the image.
+    image_seconds (N,) time of the VO step and of fetching the image; orb_images (N,) ORB extractions per frame
+    (see `VOEstimate.orb_images`).
     """
 
     timestamps: np.ndarray
@@ -1065,6 +1073,7 @@ class VOTrajectory:
     vo_seconds: np.ndarray
     image_seconds: np.ndarray
     method: list = field(default_factory=list)
+    orb_images: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.timestamps)
@@ -1072,7 +1081,8 @@ class VOTrajectory:
     def csv_rows(self) -> list[str]:
         """`odometry.csv` lines: header then one row per frame."""
         rows = ["index,timestamp,status,reference,dx,dy,dtheta,sigma_x,sigma_y,sigma_theta,n_matches,n_inliers,"
-                "inlier_ratio,rms_px,is_keyframe,vo_ms,reason,method"]
+                "inlier_ratio,rms_px,is_keyframe,vo_ms,reason,method,orb_images"]
+        orb = np.zeros(len(self.timestamps), int) if self.orb_images is None else self.orb_images
         for i in range(len(self.timestamps)):
             d, cv = self.deltas[i], self.covariances[i]
             sig = np.sqrt(np.maximum(np.diag(cv), 0.0))
@@ -1081,7 +1091,7 @@ class VOTrajectory:
                         f"{d[0]:.9f},{d[1]:.9f},{d[2]:.9f},{sig[0]:.3e},{sig[1]:.3e},{sig[2]:.3e},"
                         f"{self.n_matches[i]},{self.n_inliers[i]},{self.inlier_ratio[i]:.4f},{self.rms_px[i]:.4f},"
                         f"{int(self.is_keyframe[i])},{self.vo_seconds[i] * 1e3:.3f},{reason},"
-                        f"{(self.method[i] if i < len(self.method) else Method.NONE).value}")
+                        f"{(self.method[i] if i < len(self.method) else Method.NONE).value},{int(orb[i])}")
         return rows
 
 
@@ -1112,6 +1122,7 @@ def run_visual_odometry(camera: CameraModel, timestamps: np.ndarray, get_image: 
     kf = np.zeros(n, bool)
     t_vo = np.zeros(n)
     t_img = np.zeros(n)
+    orb = np.zeros(n, int)
     status, ref, reason, method = [], [], [], []
     for i in range(n):
         t0 = time.perf_counter()
@@ -1134,10 +1145,12 @@ def run_visual_odometry(camera: CameraModel, timestamps: np.ndarray, get_image: 
         status.append(est.status)
         ref.append(est.reference)
         method.append(est.method)
+        orb[i] = est.orb_images
         reason.append(est.reason)
         t_img[i], t_vo[i] = t1 - t0, t2 - t1
         if on_frame is not None:
             on_frame(est)
     return VOTrajectory(timestamps=ts, poses=vo.poses, deltas=deltas, covariances=covs, status=status,
                         n_matches=n_m, n_inliers=n_i, inlier_ratio=ratio, rms_px=rms, is_keyframe=kf,
-                        reference=ref, reason=reason, vo_seconds=t_vo, image_seconds=t_img, method=method)
+                        reference=ref, reason=reason, vo_seconds=t_vo, image_seconds=t_img, method=method,
+                        orb_images=orb)

@@ -272,15 +272,19 @@ def test_reacquisition_after_a_gap_keeps_one_trajectory(tex):
     assert tail[:, :2].max() < 2e-3 and tail[:, 2].max() < 2e-3
 
 
-def test_odometry_csv_reports_the_method(tex):
+def test_odometry_csv_reports_the_method_and_its_descriptor_cost(tex):
     cam = camera()
     r = FloorRenderer(cam, tex, 0.001)
     poses = _arc(5)
     traj = run_visual_odometry(cam, np.arange(5) / FPS, lambda i: r.render(poses[i]))
-    rows = traj.csv_rows()
-    assert rows[0].split(",")[:3] == ["index", "timestamp", "status"] and rows[0].endswith(",method")
-    assert [row.rsplit(",", 1)[1] for row in rows[1:]] == [m.value for m in traj.method]
+    rows = [row.split(",") for row in traj.csv_rows()]
+    assert rows[0][:3] == ["index", "timestamp", "status"] and rows[0][-2:] == ["method", "orb_images"]
+    assert [row[-2] for row in rows[1:]] == [m.value for m in traj.method]
     assert traj.method[0] == Method.NONE and all(m != Method.NONE for m in traj.method[1:])
+    # the first motion has no prediction on a self-similar floor: wherever ORB matched, the frame reports its cost
+    orb = [int(row[-1]) for row in rows[1:]]
+    assert orb == list(traj.orb_images)
+    assert all(n > 0 for n, m in zip(orb, traj.method) if m in (Method.ORB, Method.ORB_LK)), list(zip(orb, traj.method))
 
 
 def _bouncing(tex, amplitude: float, n: int = 240):
