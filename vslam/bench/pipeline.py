@@ -171,6 +171,9 @@ def _notes(sp: dict, acc: dict, acc_vo_only: dict, comp: dict, mem: dict) -> lis
              f"VO only / decode + ORB(1000): {sp['vo_fps'] / sp['decode_orb_fps']:.2f}",
              f"full pipeline / VO only speed: {median(sp['full_fps']) / sp['vo_fps']:.2f}; VO-only ATE "
              f"{acc_vo_only['ate_rmse_m']:.3f} m vs SLAM {acc['slam']['ate_rmse_m']:.3f} m",
+             f"VO descriptor path: {sp['vo_result'].summary()['vo_orb_extractions']} ORB extractions on "
+             f"{sp['vo_result'].summary()['vo_frames_with_orb']} of {len(sp['vo_result'].timestamps)} frames "
+             f"(the rest on the LK fast path)",
              "mean ms per frame: " + ", ".join(f"{k} {v:.2f}" for k, v in comp.items())]
     if mem:
         lines.append(f"peak memory: {mem['short']['peak_rss_mb']:.0f} MB at {mem['short']['frames']} frames, "

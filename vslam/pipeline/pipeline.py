@@ -85,6 +85,7 @@ class PipelineResult:
     wall_seconds: float = 0.0
     sequence: str = ""
     similarity: list = field(default_factory=list)   # per keyframe: (frame, stored frames, retrieval scores)
+    vo_orb_images: np.ndarray = field(default_factory=lambda: np.zeros(0, int))  # per frame (VOEstimate.orb_images)
 
     @property
     def accepted_loops(self) -> list[LoopRecord]:
@@ -104,7 +105,9 @@ class PipelineResult:
                 "median_ms": tm, "wall_seconds": self.wall_seconds,
                 "frames_per_second": n / self.wall_seconds if self.wall_seconds > 0 else float("nan"),
                 "descriptor_bytes_mean": float(np.mean(self.descriptor_bytes)) if len(self.descriptor_bytes) else 0.0,
-                "descriptor_bytes_max": int(np.max(self.descriptor_bytes)) if len(self.descriptor_bytes) else 0}
+                "descriptor_bytes_max": int(np.max(self.descriptor_bytes)) if len(self.descriptor_bytes) else 0,
+                "vo_orb_extractions": int(np.sum(self.vo_orb_images)),
+                "vo_frames_with_orb": int(np.count_nonzero(self.vo_orb_images))}
 
     def write(self, out_dir: str | Path, **kw) -> Path:
         return write_outputs(self, out_dir, **kw)
@@ -145,6 +148,7 @@ class Pipeline:
         self.poses_vo: list[np.ndarray] = []
         self.vo_status: list[str] = []
         self.vo_inliers: list[int] = []
+        self.vo_orb_images: list[int] = []
         self.keyframes: list[int] = []
         self.kf_slam: list[np.ndarray] = []     # current estimate of each keyframe
         self.kf_step_cov: list[np.ndarray] = []  # VO covariance of the step from the previous keyframe
@@ -206,6 +210,7 @@ class Pipeline:
         self.poses_vo.append(pose_vo)
         self.vo_status.append(est.status.value)
         self.vo_inliers.append(int(est.n_inliers))
+        self.vo_orb_images.append(int(est.orb_images))
         if index > 0:
             self._acc_delta, self._acc_cov = compose_with_covariance(self._acc_delta, self._acc_cov, est.delta,
                                                                      est.covariance)
@@ -414,7 +419,7 @@ class Pipeline:
                               keyframes=np.asarray(self.keyframes, int), loops=self.loops, graph=self.graph.to_data(),
                               graph_result=self.last_result, timings=timings, vo_status=np.asarray(self.vo_status),
                               vo_inliers=np.asarray(self.vo_inliers), descriptor_bytes=np.asarray(self.descriptor_bytes),
-                              similarity=self.similarity)
+                              similarity=self.similarity, vo_orb_images=np.asarray(self.vo_orb_images, int))
 
     # ------------------------------------------------------------------ whole sequences
     def run(self, seq, progress: Callable[[int, int], None] | None = None, max_frames: int | None = None,
