@@ -157,6 +157,15 @@ class VOConfig(Config):
     coarse_retry: bool = True
     retry_levels: int = setting(3, range="[0, inf)")
     coarse_min_response: float = setting(0.05, range="[0, inf)")
+    # a periodic floor (a printed photograph tiled every 0.256 m on render_floor) has a copy of the view one period
+    # away: the deep pyramid's coarse levels can settle on that copy (255 px off the start, beyond the ~112 px
+    # that 3 levels of a 15 px window can reach), and a phase correlation peak can sit on it too. The pyramid retry
+    # keeps only a motion within its capture range of its start (`VisualOdometry._capture_range`), and with wheel
+    # odometry the phase-correlation start must pass `prediction_gate` like a descriptor motion
+    retry_capture_check: bool = setting(True, doc="the deep-pyramid LK retry keeps only a motion within its capture "
+                                                  "range (half the LK window x (2^(levels+1) - 1) px) of its start")
+    shift_gate: bool = setting(True, doc="with wheel odometry, a motion found from the phase-correlation start must "
+                                         "pass prediction_gate")
     # LK windows (15 px) are not rotated: beyond ~20 degrees their corners move by more than LK's linear range, so
     # the current frame is first rotated back by the predicted rotation (about the principal point: exact for a
     # radial lens). Above the 12 degree keyframe rule, so it never acts at high frame rates.
@@ -696,7 +705,7 @@ class VisualOdometry:
             out, method = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, h_ref=h_ref), Method.LK
             if out[0] is None and deep > c.lk_levels:
                 # a poor prediction (slip, failed frames in between): the same start with a wider capture range
-                out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, levels=deep, h_ref=h_ref)
+                out = self._deep_track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, deep, h_ref)
                 method = Method.LK_PYRAMID
         if out[0] is None and cv is not None and self._gate is not None and cv[1] <= 0.5 * c.lk_window:
             # the prediction (wheel odometry) missed by more than LK's capture range, e.g. in a wheel slip: the
@@ -724,10 +733,34 @@ class VisualOdometry:
                 out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), shift=shift, levels=deep,
                                   h_ref=h_ref)
                 method = Method.LK_SHIFT
+                # the correlation peak of a periodic floor can be a copy of the view one period away: with wheel
+                # odometry, the motion must be where the robot can be (like a descriptor motion)
+                if out[0] is not None and c.shift_gate and gate is not None and t_ref_cur is not None \
+                        and not self._in_gate(out[0], t_ref_cur, gate[1]):
+                    out = _NO_MATCH
         if out[0] is None and t_ref_cur is None:
-            out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), levels=deep, h_ref=h_ref)
+            out = self._deep_track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), deep, h_ref)
             method = Method.LK_PYRAMID
         return out, (method if out[0] is not None else Method.NONE)
+
+    def _capture_range(self, levels: int) -> float:
+        """Pixels from its start that pyramidal LK with `levels` levels above the image can reach: half the window
+        at the top level, refined level by level (Bouguet's d_max (2^(L+1) - 1); 112 px for a 15 px window and 3
+        levels). A result farther off was not reached by tracking from the start: on a periodic floor, a copy."""
+        return 0.5 * self.config.lk_window * (2 ** (levels + 1) - 1)
+
+    def _offset_px(self, a: np.ndarray, b: np.ndarray) -> float:
+        """How far apart two motions put the image: their translation in pixels plus the rotation at the image edge."""
+        d = a - b
+        return math.hypot(d[0], d[1]) / self._m_per_px + abs(wrap_angle(d[2])) * 0.5 * max(self.camera.size)
+
+    def _deep_track(self, ref_gray, ref_px, ref_xn, ref_floor, gray, start: np.ndarray, levels: int, h_ref):
+        """LK with a deep pyramid from the motion `start`; its result only within the pyramid's capture range."""
+        out = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, start, levels=levels, h_ref=h_ref)
+        if out[0] is not None and self.config.retry_capture_check \
+                and self._offset_px(out[0].delta, start) > self._capture_range(levels):
+            return _NO_MATCH
+        return out
 
     def _orb(self, images: _Images, dense: bool = False) -> Features:
         c = self.config
@@ -882,7 +915,8 @@ class VisualOdometry:
         prev_xn = self.camera.normalize(prev_px)
         h = self._height
         (fit, ref_px, cur_px, _), method = self._measure(self._prev_gray, prev_px, prev_xn, self._floor(prev_xn, h),
-                                                         gray, pred if self._predicted else None, h_ref=h, cv=self._cv)
+                                                         gray, pred if self._predicted else None, gate=self._gate,
+                                                         h_ref=h, cv=self._cv)
         if fit is None and c.descriptors:
             # descriptors against the previous frame, with corners of its own: the keyframe corners it tracked sit
             # where it overlapped the keyframe, often not where it overlaps this frame (a low rate)
