@@ -166,6 +166,13 @@ class VOConfig(Config):
                                                   "range (half the LK window x (2^(levels+1) - 1) px) of its start")
     shift_gate: bool = setting(True, doc="with wheel odometry, a motion found from the phase-correlation start must "
                                          "pass prediction_gate")
+    # the prediction gate is as wide as the wheel odometry is uncertain (render_floor's fused motion: 25 mm per
+    # 15 mm frame, x2 inflated, 6 sigma: 300 mm, more than a 256 mm period). At high frame rates the motion vision
+    # measured on the previous frame bounds the robot far tighter (prediction_accel: 4 px at 20 frames/s), so a
+    # retry's motion (deep pyramid, descriptors, phase correlation) outside that bound is a copy of the view or a
+    # wrong settle; and a weak LK fit from the wheel prediction outside it is first retried from that motion
+    cv_gate: bool = setting(True, doc="when the constant-velocity motion is known within LK's capture range, a "
+                                      "retry's motion must agree with it (within its bound + orb_threshold_px)")
     # LK windows (15 px) are not rotated: beyond ~20 degrees their corners move by more than LK's linear range, so
     # the current frame is first rotated back by the predicted rotation (about the principal point: exact for a
     # radial lens). Above the 12 degree keyframe rule, so it never acts at high frame rates.
@@ -697,6 +704,12 @@ class VisualOdometry:
         c = self.config
         deep = max(c.lk_levels, c.retry_levels)
         out, method = _NO_MATCH, Method.NONE
+        # at high frame rates the constant-velocity motion says where the robot can be (VOConfig.cv_gate)
+        bounded = c.cv_gate and cv is not None and cv[1] <= 0.5 * c.lk_window
+
+        def implausible(o) -> bool:
+            return bounded and o[0] is not None and not self._holds(o[0].delta, cv)
+
         if self._dense_pass:
             if keyframe is not None:
                 out, method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
@@ -707,6 +720,8 @@ class VisualOdometry:
                 # a poor prediction (slip, failed frames in between): the same start with a wider capture range
                 out = self._deep_track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, deep, h_ref)
                 method = Method.LK_PYRAMID
+                if implausible(out):
+                    out = _NO_MATCH
         if out[0] is None and cv is not None and self._gate is not None and cv[1] <= 0.5 * c.lk_window:
             # the prediction (wheel odometry) missed by more than LK's capture range, e.g. in a wheel slip: the
             # motion vision measured on the previous frame is a start within a few pixels at high frame rates
@@ -721,12 +736,24 @@ class VisualOdometry:
             # (seen at lane turns on real grass and carpet photographs). The descriptor path starts LK on the same
             # keyframe corners from where the ORB matches put them; when the two places differ, the start that
             # tracks more of them wins (when they agree, LK's own fit stands: the frame is not a descriptor frame)
-            alt, alt_method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
+            alt, alt_method = _NO_MATCH, Method.NONE
+            if bounded:
+                # the weak fit is not where the robot can be: LK from the constant-velocity motion first (one LK
+                # pass; on a periodic floor the descriptors match the copy of the view as well as the place)
+                alt, alt_method = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, cv[0], h_ref=h_ref), Method.LK
+                if implausible(alt):
+                    alt = _NO_MATCH
+            if alt[0] is None:
+                alt, alt_method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
+                if implausible(alt):
+                    alt = _NO_MATCH
             if alt[0] is not None and alt[0].n_inliers > out[0].n_inliers \
                     and not self._same_place(alt[0].delta, out[0].delta):
                 out, method = alt, alt_method
         if out[0] is None and keyframe is not None and c.descriptors:
             out, method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
+            if implausible(out):
+                out = _NO_MATCH
         if out[0] is None and c.coarse_retry:
             shift, response = coarse_shift(ref_gray.coarse, gray.coarse)
             if response > c.coarse_min_response:
@@ -735,8 +762,8 @@ class VisualOdometry:
                 method = Method.LK_SHIFT
                 # the correlation peak of a periodic floor can be a copy of the view one period away: with wheel
                 # odometry, the motion must be where the robot can be (like a descriptor motion)
-                if out[0] is not None and c.shift_gate and gate is not None and t_ref_cur is not None \
-                        and not self._in_gate(out[0], t_ref_cur, gate[1]):
+                if implausible(out) or (out[0] is not None and c.shift_gate and gate is not None
+                                        and t_ref_cur is not None and not self._in_gate(out[0], t_ref_cur, gate[1])):
                     out = _NO_MATCH
         if out[0] is None and t_ref_cur is None:
             out = self._deep_track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), deep, h_ref)
