@@ -169,10 +169,12 @@ class VOConfig(Config):
     # the prediction gate is as wide as the wheel odometry is uncertain (render_floor's fused motion: 25 mm per
     # 15 mm frame, x2 inflated, 6 sigma: 300 mm, more than a 256 mm period). At high frame rates the motion vision
     # measured on the previous frame bounds the robot far tighter (prediction_accel: 4 px at 20 frames/s), so a
-    # retry's motion (deep pyramid, descriptors, phase correlation) outside that bound is a copy of the view or a
-    # wrong settle; and a weak LK fit from the wheel prediction outside it is first retried from that motion
-    cv_gate: bool = setting(True, doc="when the constant-velocity motion is known within LK's capture range, a "
-                                      "retry's motion must agree with it (within its bound + orb_threshold_px)")
+    # descriptor or phase-correlation motion outside that bound is a copy of the view or a wrong place; and a weak
+    # LK fit from the wheel prediction outside it is first retried from that motion (the deep-pyramid retry, which
+    # starts from the wheel prediction, is bounded by its capture range instead)
+    cv_gate: bool = setting(True, doc="with wheel odometry, when the constant-velocity motion is known within LK's "
+                                      "capture range, a descriptor or phase-correlation motion must agree with it "
+                                      "(within its bound + orb_threshold_px)")
     # LK windows (15 px) are not rotated: beyond ~20 degrees their corners move by more than LK's linear range, so
     # the current frame is first rotated back by the predicted rotation (about the principal point: exact for a
     # radial lens). Above the 12 degree keyframe rule, so it never acts at high frame rates.
@@ -704,8 +706,9 @@ class VisualOdometry:
         c = self.config
         deep = max(c.lk_levels, c.retry_levels)
         out, method = _NO_MATCH, Method.NONE
-        # at high frame rates the constant-velocity motion says where the robot can be (VOConfig.cv_gate)
-        bounded = c.cv_gate and cv is not None and cv[1] <= 0.5 * c.lk_window
+        # at high frame rates the constant-velocity motion says where the robot can be (VOConfig.cv_gate); with wheel
+        # odometry only, like the constant-velocity start (without it, cv is the prediction itself)
+        bounded = c.cv_gate and self._gate is not None and cv is not None and cv[1] <= 0.5 * c.lk_window
 
         def implausible(o) -> bool:
             return bounded and o[0] is not None and not self._holds(o[0].delta, cv)
@@ -720,8 +723,6 @@ class VisualOdometry:
                 # a poor prediction (slip, failed frames in between): the same start with a wider capture range
                 out = self._deep_track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, deep, h_ref)
                 method = Method.LK_PYRAMID
-                if implausible(out):
-                    out = _NO_MATCH
         if out[0] is None and cv is not None and self._gate is not None and cv[1] <= 0.5 * c.lk_window:
             # the prediction (wheel odometry) missed by more than LK's capture range, e.g. in a wheel slip: the
             # motion vision measured on the previous frame is a start within a few pixels at high frame rates
