@@ -744,10 +744,12 @@ class VisualOdometry:
                 alt, alt_method = self._track(ref_gray, ref_px, ref_xn, ref_floor, gray, cv[0], h_ref=h_ref), Method.LK
                 if implausible(alt):
                     alt = _NO_MATCH
-            if alt[0] is None:
-                alt, alt_method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
-                if implausible(alt):
-                    alt = _NO_MATCH
+            if alt[0] is None or alt[0].n_inliers <= out[0].n_inliers:
+                # ... and when that does not track more corners, the descriptor check as without the bound
+                orb, orb_method = self._descriptor_match(keyframe, gray, t_ref_cur, gate)
+                if orb[0] is not None and not implausible(orb) \
+                        and (alt[0] is None or orb[0].n_inliers > alt[0].n_inliers):
+                    alt, alt_method = orb, orb_method
             if alt[0] is not None and alt[0].n_inliers > out[0].n_inliers \
                     and not self._same_place(alt[0].delta, out[0].delta):
                 out, method = alt, alt_method

@@ -70,8 +70,9 @@ def test_no_period_jump_at_a_high_frame_rate(floor, seed):
     """20 frames/s, wheel odometry off by ~8 mm per frame (stated 25 mm, as render_floor's fused odometry): the
     prediction often misses LK's capture range and the retries run; the keyframe lasts about one period. Before
     this was guarded, seeds 0 and 4 jumped by one period through the deep-pyramid retry (frames 23 and 20), and
-    seed 6 through the descriptor check of a weak LK fit (frame 21; the wheel gate, 6 sigma of 2 x 25 mm, is wider
-    than the period, the constant-velocity bound is 4 px)."""
+    seed 6 through the descriptor path (frame 21), also with only the capture-range and phase-correlation guards
+    in place (the wheel gate, 6 sigma of 2 x 25 mm, is wider than the period; the constant-velocity bound is
+    4 px)."""
     est, truth = _run(floor, np.array([STEP, 0.0, 0.0]), 30, 20.0,
                       lambda rng: np.array([rng.normal(0, 0.008), rng.normal(0, 0.004), 0.0]), (0.025, 0.01), seed)
     err = np.hypot(*(est[:, :2] - truth[:, :2]).T)
