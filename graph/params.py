@@ -152,6 +152,12 @@ class RobustParams(Config):
                                             "the agreeing cycles (graph.support; public graphs state noise 10-1000x "
                                             "too loose, the pipeline's loop poses ~2x too tight); the margin because "
                                             "residual tails of real graphs are heavier than chi-square")
+    calibration_split: bool = setting(True, unit="flag",
+                                      doc="3D graphs: calibrate the translation and rotation noise by separate "
+                                          "variance factors of the agreeing cycles (graph.calibration) and solve on "
+                                          "the calibrated information; one factor for both loosened sphere2500's "
+                                          "thresholds until local false loops fit, and tightened parking-garage's "
+                                          "until true loops were rejected (docs/graph.md). Planar graphs: one factor")
     calibration_min_loops: int = setting(10, range="[1, inf)", unit="cycles",
                                          doc="calibrate only with at least this many agreeing cycles")
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",

@@ -12,6 +12,8 @@ stretch) that support each other; a random false loop has no support. Groups of 
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -73,10 +75,34 @@ def chain_poses(data: PoseGraphData) -> np.ndarray:
     return out
 
 
+@dataclass(frozen=True)
+class CycleSupport:
+    """The agreeing neighbour pairs of `cycle_support` with what their test computed, so the noise calibration
+    (graph.calibration) reads the same cycles: P, Q (loop indices in loop order, P before Q in time), r2 (squared
+    Mahalanobis error on the stated covariances), errors (n, d) and covariances (n, d, d) of each cycle in the
+    file's information order (planar: x, y, theta; 3D: translation, rotation)."""
+
+    P: np.ndarray
+    Q: np.ndarray
+    r2: np.ndarray
+    errors: np.ndarray
+    covariances: np.ndarray
+
+    @property
+    def pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.P, self.Q, self.r2
+
+
 def loop_support(data: PoseGraphData, window: int, threshold: float, odometry_cov: np.ndarray | None = None,
                  propagate: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Agreeing neighbour pairs (see the module doc): (P, Q, r2): loop indices (loop order), P before Q in time,
-    and the squared Mahalanobis error of their cycle on the stated covariances.
+    and the squared Mahalanobis error of their cycle on the stated covariances (`cycle_support`'s pairs)."""
+    return cycle_support(data, window, threshold, odometry_cov, propagate).pairs
+
+
+def cycle_support(data: PoseGraphData, window: int, threshold: float, odometry_cov: np.ndarray | None = None,
+                  propagate: bool = False) -> CycleSupport:
+    """The agreeing neighbour pairs (see the module doc) with their cycle errors and covariances.
 
     threshold: chi-square bound on the cycle's squared Mahalanobis error. odometry_cov: covariance of one
     odometry step (default: the mean of the graph's odometry covariances; each step's own when propagating), added
@@ -84,7 +110,9 @@ def loop_support(data: PoseGraphData, window: int, threshold: float, odometry_co
     order through the cycle (`_cycle_covariances_3d`).
     """
     L = data.num_loops
-    none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+    d = 3 if data.dim == 2 else 6
+    none = CycleSupport(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, d)),
+                        np.zeros((0, d, d)))
     if L < 2 or window <= 0:
         return none
     a_all, b_all = data.edge_index_pairs()
@@ -115,7 +143,7 @@ def loop_support(data: PoseGraphData, window: int, threshold: float, odometry_co
         s = cov[P] + cov[Q] + steps * odometry_cov[None]
     r2 = np.einsum("ni,ni->n", e, np.linalg.solve(s, e[..., None])[..., 0])
     ok = r2 <= threshold
-    return P[ok], Q[ok], r2[ok]
+    return CycleSupport(P[ok], Q[ok], r2[ok], e[ok], s[ok])
 
 
 _PERM = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])   # (t, r) <-> (r, t)
