@@ -59,7 +59,11 @@ def _quadratic_parts(e: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 def split_factors(cycles: CycleSupport) -> VarianceFactors | None:
     """Rotation and translation variance factors of 3D cycles (see the module doc); None when the rotation part
-    carries no error (a noiseless graph: nothing to split)."""
+    carries no error (a noiseless graph: nothing to split). With the cycle covariances decomposed by the source of
+    the noise (`CycleSupport.from_translation`, `from_rotation`), the scaled cycle covariance is
+    s_t S_T + s_r S_R (the lever arm of the rotation noise scales with s_r); else the blocks of the summed one."""
+    if cycles.from_translation is not None and cycles.from_rotation is not None:
+        return _split_propagated(cycles)
     med3 = float(chi2.ppf(0.5, 3))
     a, b, c, rot = _quadratic_parts(np.asarray(cycles.errors, float), np.asarray(cycles.covariances, float))
     s_r = float(np.median(rot)) / med3
@@ -84,6 +88,37 @@ def split_factors(cycles: CycleSupport) -> VarianceFactors | None:
     else:
         return None
     s_t = float(np.exp(brentq(excess, lo, hi, xtol=1e-10)))
+    return VarianceFactors(s_t, s_r, scalar_factor(cycles, 6))
+
+
+def _split_propagated(cycles: CycleSupport) -> VarianceFactors | None:
+    med3 = float(chi2.ppf(0.5, 3))
+    e = np.asarray(cycles.errors, float)[cycles.decomposed]
+    s_t_part, s_r_part = np.asarray(cycles.from_translation, float), np.asarray(cycles.from_rotation, float)
+    er = e[:, 3:]
+    # the rotation error of a cycle comes from rotation noise alone
+    rot = np.einsum("ni,ni->n", er, np.linalg.solve(s_r_part[:, 3:, 3:], er[..., None])[..., 0])
+    s_r = float(np.median(rot)) / med3
+    if not np.isfinite(s_r) or s_r <= 0.0:
+        return None
+
+    def excess(log_st: float) -> float:
+        s = np.exp(log_st) * s_t_part + s_r * s_r_part
+        full = np.einsum("ni,ni->n", e, np.linalg.solve(s, e[..., None])[..., 0])
+        return float(np.median(full - rot / s_r)) - med3
+
+    # bracket from the translation block of the rotation-free part (its value without lever arms)
+    et = e[:, :3]
+    marginal = float(np.median(np.einsum("ni,ni->n", et, np.linalg.solve(s_t_part[:, :3, :3], et[..., None])[..., 0])))
+    guess = np.log(marginal / med3) if marginal > 0 else np.log(s_r)
+    lo, hi = guess - 2.0, guess + 2.0
+    for _ in range(20):
+        if excess(lo) > 0 > excess(hi):
+            break
+        lo, hi = lo - 2.0, hi + 2.0
+    else:
+        return None
+    s_t = float(np.exp(brentq(excess, lo, hi, xtol=1e-6)))
     return VarianceFactors(s_t, s_r, scalar_factor(cycles, 6))
 
 

@@ -152,7 +152,7 @@ def _joint_screen(built: BuiltGraph, values: gtsam.Values, inlier: np.ndarray, c
 
 def _drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                        inlier: np.ndarray, c2: np.ndarray, scale: float, init: InitMethod, params: GraphParams,
-                       notes: list[str]) -> tuple[gtsam.Values, np.ndarray, int]:
+                       notes: list[str], start_built: BuiltGraph | None = None) -> tuple[gtsam.Values, np.ndarray, int]:
     """The group-level test: each kept revisit cluster (graph.support.revisits) is one hypothesis in the TLS
     objective, truncated at its group threshold (`group_threshold`); a cluster is dropped when the map solved
     without it has the lower objective.
@@ -167,6 +167,7 @@ def _drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFa
     amount the cluster corrected, which costs it its group threshold and more. Cost: one warm LM solve per
     tested cluster (the `group_tests` whose loops sit nearest their thresholds) screens with a few warm LM
     iterations; full warm and LAGO / chordal re-solves only for a cluster whose loops no longer fit without it.
+    `start_built`: the graph whose LAGO / chordal guess starts those re-solves (default `built`).
     """
     iters = 0
     budget = params.robust.group_tests
@@ -208,7 +209,8 @@ def _drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFa
         # also from a fresh LAGO / chordal start on the rest: a map bent by tens of metres does not unbend by
         # local steps (ring random-grouped: a local minimum above the objective with the group kept)
         try:
-            guess = values_from_array(data.dim, initial_guess(data, built.subset(trial), init))
+            start = built if start_built is None else start_built
+            guess = values_from_array(data.dim, initial_guess(data, start.subset(trial), init))
             v2, it = _lm(built.graph(trial), guess, params, params.solver.lm_max_iterations)
             iters += it
             f2 = objective(v2, member, c2g)
@@ -231,19 +233,20 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     notes: list[str] = []
     t0 = time.perf_counter()
     # 1. local consistency
+    split = params.robust.calibrate_noise and params.robust.calibration_split and data.dim == 3
     cycles = cycle_support(data, params.robust.support_window,
                            float(chi2.ppf(params.robust.support_probability, dof)),
-                           propagate=params.robust.support_propagate)
+                           propagate=params.robust.support_propagate,
+                           decompose=params.robust.calibration_propagate if split else 0)
     pairs = cycles.pairs
     calibrate = params.robust.calibrate_noise and len(pairs[2]) >= params.robust.calibration_min_loops
-    factors = split_factors(cycles) if (calibrate and params.robust.calibration_split and data.dim == 3) else None
+    factors = split_factors(cycles) if (calibrate and split) else None
     if factors is not None:
         # the robust solve runs on the calibrated model (its thresholds carry no variance factor); the final polish
         # and the reported residuals are on the stated information
-        solve_data = scale_information(data, factors)
-        built = build(solve_data, params.replace(robust="none"))
+        built = build(scale_information(data, factors), params.replace(robust="none"))
     else:
-        built, solve_data = stated, data
+        built = stated
     L = len(built.loops)
     c2 = loop_thresholds(data.probability[built.loop_idx], dof, params)
     base = built.priors + built.odometry
@@ -253,12 +256,14 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     supported[pairs[0]] = True
     supported[pairs[1]] = True
     # 2. starts: least squares on the supported loops from LAGO / chordal; the odometry chain
-    odometry_values = values_from_array(data.dim, initial_guess(solve_data, built, InitMethod.ODOMETRY))
+    odometry_values = values_from_array(data.dim, initial_guess(data, stated, InitMethod.ODOMETRY))
     starts = []
     method = resolve_init(data, params.replace(robust="none"))     # AUTO: LAGO (2D) / chordal (3D)
     if supported.any() or method == InitMethod.GIVEN:
         try:
-            guess = initial_guess(solve_data, built.subset(supported), method)
+            # the LAGO / chordal guess from the stated information: it is only a start, and the calibrated one can
+            # be too ill-conditioned for the chordal relaxation (garage: rotation 500x tighter than translation)
+            guess = initial_guess(data, stated.subset(supported), method)
             # only a start: GNC continues from it (a converged solve here cost 60 s on city10000 at 50 %)
             v, _ = _lm(built.graph(supported), values_from_array(data.dim, guess), params,
                        params.robust.consensus_inner_iterations)
@@ -333,8 +338,8 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     # 4. polish; admit the loops that fit at the solution; try the unsupported loops closest to fitting jointly
     values, it = _lm(built.graph(inlier), values, params, params.solver.lm_max_iterations)
     iters += it
-    values, inlier, it = _drop_false_groups(solve_data, built, base_graph, values, inlier, c2, scale, method, params,
-                                           notes)
+    values, inlier, it = _drop_false_groups(data, built, base_graph, values, inlier, c2, scale, method, params,
+                                           notes, stated)
     iters += it
     values, inlier, it = _readmit(built, values, inlier, c2, params, notes)
     iters += it

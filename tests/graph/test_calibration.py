@@ -27,6 +27,18 @@ def test_split_recovers_both_factors(seed):
     assert f.translation < f.scalar < f.rotation
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_propagated_split_attributes_the_lever_arm_to_the_rotation_noise(seed):
+    # rotation noise 0.02 rad per step: over a cycle of ~10 steps of 0.5 m it moves the translation by more than
+    # the translation noise itself; the summed blocks would charge that to the translation factor
+    data, _, _ = mis_stated_graph(np.random.default_rng(seed), sigma_r=0.02, stated_t=10.0, stated_r=2.0)
+    f = split_factors(cycle_support(data, 10, float(chi2.ppf(0.99, 6)), decompose=5000))
+    assert 1 / 1.5 < f.translation / 0.01 < 1.5
+    assert 1 / 1.5 < f.rotation / 0.25 < 1.5
+    summed = split_factors(_cycles(data))
+    assert summed.translation > 1.5 * f.translation
+
+
 def test_equally_mis_stated_noise_gives_equal_factors():
     data, _, _ = mis_stated_graph(np.random.default_rng(3), stated_t=3.0, stated_r=3.0)
     f = split_factors(_cycles(data))
