@@ -79,3 +79,12 @@ def test_planar_graphs_ignore_the_split_setting():
     off = optimize(data, GraphParams().replace(robust={"calibration_split": False}))
     np.testing.assert_array_equal(on.poses, off.poses)
     np.testing.assert_array_equal(on.loop_inlier, off.loop_inlier)
+
+
+def test_rotation_stated_far_too_loose_keeps_every_true_loop():
+    # parking-garage states its rotation noise ~500x looser (in variance, relative to translation) than its cycles
+    # show; the calibrated information is then too ill-conditioned for a chordal start, which uses the stated one
+    data, _, false = mis_stated_graph(np.random.default_rng(0), stated_t=2.0, stated_r=300.0, num_false=20)
+    res = optimize(data, GraphParams())
+    assert res.loop_inlier[~false].all()
+    assert not res.loop_inlier[false].any()
