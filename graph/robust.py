@@ -26,6 +26,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from graph.batch import BuiltGraph, build, initial_guess, lm_params, resolve_init
+from graph.calibration import scalar_factor, scale_information, split_factors
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.gnc import tls_weights
 from graph.kernel_start import dcs_solve, tls_descent
@@ -34,7 +35,7 @@ from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.polish import polish
 from graph.readmit import readmit_dropped, readmit_supported
 from graph.result import GraphResult
-from graph.support import clusters, loop_support, revisits
+from graph.support import clusters, cycle_support, revisits
 from graph.thresholds import loop_thresholds
 
 
@@ -151,7 +152,7 @@ def _joint_screen(built: BuiltGraph, values: gtsam.Values, inlier: np.ndarray, c
 
 def _drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                        inlier: np.ndarray, c2: np.ndarray, scale: float, init: InitMethod, params: GraphParams,
-                       notes: list[str]) -> tuple[gtsam.Values, np.ndarray, int]:
+                       notes: list[str], start_built: BuiltGraph | None = None) -> tuple[gtsam.Values, np.ndarray, int]:
     """The group-level test: each kept revisit cluster (graph.support.revisits) is one hypothesis in the TLS
     objective, truncated at its group threshold (`group_threshold`); a cluster is dropped when the map solved
     without it has the lower objective.
@@ -166,6 +167,7 @@ def _drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFa
     amount the cluster corrected, which costs it its group threshold and more. Cost: one warm LM solve per
     tested cluster (the `group_tests` whose loops sit nearest their thresholds) screens with a few warm LM
     iterations; full warm and LAGO / chordal re-solves only for a cluster whose loops no longer fit without it.
+    `start_built`: the graph whose LAGO / chordal guess starts those re-solves (default `built`).
     """
     iters = 0
     budget = params.robust.group_tests
@@ -207,7 +209,8 @@ def _drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFa
         # also from a fresh LAGO / chordal start on the rest: a map bent by tens of metres does not unbend by
         # local steps (ring random-grouped: a local minimum above the objective with the group kept)
         try:
-            guess = values_from_array(data.dim, initial_guess(data, built.subset(trial), init))
+            start = built if start_built is None else start_built
+            guess = values_from_array(data.dim, initial_guess(data, start.subset(trial), init))
             v2, it = _lm(built.graph(trial), guess, params, params.solver.lm_max_iterations)
             iters += it
             f2 = objective(v2, member, c2g)
@@ -225,28 +228,42 @@ def _drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFa
 
 def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     t_start = time.perf_counter()
-    built = build(data, params.replace(robust="none"))
-    L = len(built.loops)
+    stated = build(data, params.replace(robust="none"))
     dof = TANGENT_DIM[data.dim]
-    c2 = loop_thresholds(data.probability[built.loop_idx], dof, params)
     notes: list[str] = []
-    base = built.priors + built.odometry
-    base_graph = graph_of(base)
     t0 = time.perf_counter()
     # 1. local consistency
-    pairs = loop_support(data, params.robust.support_window, float(chi2.ppf(params.robust.support_probability, dof)),
-                         propagate=params.robust.support_propagate)
+    split = params.robust.calibrate_noise and params.robust.calibration_split and data.dim == 3
+    cycles = cycle_support(data, params.robust.support_window,
+                           float(chi2.ppf(params.robust.support_probability, dof)),
+                           propagate=params.robust.support_propagate,
+                           decompose=params.robust.calibration_propagate if split else 0)
+    pairs = cycles.pairs
+    calibrate = params.robust.calibrate_noise and len(pairs[2]) >= params.robust.calibration_min_loops
+    factors = split_factors(cycles) if (calibrate and split) else None
+    if factors is not None:
+        # the robust solve runs on the calibrated model (its thresholds carry no variance factor); the final polish
+        # and the reported residuals are on the stated information
+        built = build(scale_information(data, factors), params.replace(robust="none"))
+    else:
+        built = stated
+    L = len(built.loops)
+    c2 = loop_thresholds(data.probability[built.loop_idx], dof, params)
+    base = built.priors + built.odometry
+    base_graph = graph_of(base)
     label = clusters(L, pairs[0], pairs[1]) if (L and params.robust.cluster_weights) else np.arange(L)
     supported = np.zeros(L, bool)
     supported[pairs[0]] = True
     supported[pairs[1]] = True
     # 2. starts: least squares on the supported loops from LAGO / chordal; the odometry chain
-    odometry_values = values_from_array(data.dim, initial_guess(data, built, InitMethod.ODOMETRY))
+    odometry_values = values_from_array(data.dim, initial_guess(data, stated, InitMethod.ODOMETRY))
     starts = []
     method = resolve_init(data, params.replace(robust="none"))     # AUTO: LAGO (2D) / chordal (3D)
     if supported.any() or method == InitMethod.GIVEN:
         try:
-            guess = initial_guess(data, built.subset(supported), method)
+            # the LAGO / chordal guess from the stated information: it is only a start, and the calibrated one can
+            # be too ill-conditioned for the chordal relaxation (garage: rotation 500x tighter than translation)
+            guess = initial_guess(data, stated.subset(supported), method)
             # only a start: GNC continues from it (a converged solve here cost 60 s on city10000 at 50 %)
             v, _ = _lm(built.graph(supported), values_from_array(data.dim, guess), params,
                        params.robust.consensus_inner_iterations)
@@ -254,15 +271,21 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         except RuntimeError:
             notes.append("LAGO / chordal start on the supported loops failed")
     scale = sigma0 = 1.0
-    if params.robust.calibrate_noise and len(pairs[2]) >= params.robust.calibration_min_loops:
+    if factors is not None:
+        # the information is calibrated already (graph.calibration): only the heavy-tail margin is left
+        scale = params.robust.calibration_margin
+        c2 = c2 * scale
+        notes.append(f"variance factors translation {factors.translation:.3g}, rotation {factors.rotation:.3g} "
+                     f"(one factor: {factors.scalar:.3g}): thresholds x {scale:.3g} on the calibrated information")
+    elif calibrate:
         # variance factor from the agreeing cycles: their median error over the chi-square median. Local, so
         # neither drift nor a false loop bending the map (both inflate a global a-posteriori estimate) enter it
-        sigma0 = float(np.median(pairs[2])) / float(chi2.ppf(0.5, dof))
+        sigma0 = scalar_factor(cycles, dof)
         scale = params.robust.calibration_margin * sigma0
         c2 = c2 * scale
         notes.append(f"variance factor {sigma0:.3g}: thresholds x {scale:.3g}")
     init_seconds = time.perf_counter() - t0
-    initial_cost = float(built.graph().error(odometry_values))
+    initial_cost = float(stated.graph().error(odometry_values))
     best = None
     iters = 0
     # GNC over the supported loops only: an unsupported loop is tested once the map is solved (step 4). This keeps
@@ -316,7 +339,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     values, it = _lm(built.graph(inlier), values, params, params.solver.lm_max_iterations)
     iters += it
     values, inlier, it = _drop_false_groups(data, built, base_graph, values, inlier, c2, scale, method, params,
-                                           notes)
+                                           notes, stated)
     iters += it
     values, inlier, it = _readmit(built, values, inlier, c2, params, notes)
     iters += it
@@ -366,14 +389,14 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     iters += it
     t_polish = time.perf_counter()
     # 5. the loop set is decided: converge the map on it (graph.polish; LM stopped at its cost tolerance)
-    values, it, why = polish(built.graph(inlier), values, data.dim, params)
+    values, it, why = polish(stated.graph(inlier), values, data.dim, params)
     iters += it
     t_end = time.perf_counter()
     notes.append(f"polish: {it} Gauss-Newton steps ({why})")
     notes.append(f"stages: support+starts {init_seconds:.2f} s, GNC {t_gnc - t0 - init_seconds:.2f} s, "
                  f"trial+readmit {t_polish - t_gnc:.2f} s, polish {t_end - t_polish:.2f} s")
-    r2 = built.r2(values)
-    final_cost = float(built.graph(inlier).error(values))
+    r2 = stated.r2(values)
+    final_cost = float(stated.graph(inlier).error(values))
     notes.append(f"support: {int(supported.sum())} of {L} loops")
     poses = array_from_values(data.dim, values, data.num_nodes)
     seconds = time.perf_counter() - t0
