@@ -9,7 +9,10 @@ With the two links a_{k-1} (k-2 -> k-1) and a_k (k-1 -> k) they form a triangle:
     path B: b,                          variance v_B = var(b)
 
 both the log height of k over k-2. Their inverse-variance mean is the fused step, the keyframe's log height is
-L_{k-2} plus it, with the fused variance. The disagreement D = A - B is what the single chain cannot see:
+L_{k-2} plus it. Its variance stays the single chain's (path A's), unless `shrink_variance`: the fused variance
+holds only when the two paths' errors are independent, and an error of frame k's own view (a tilt that couples
+into the height, as in our simulator) is common to both and unseen by the triangle; the height tracker
+(`odometry.height`) then trusts the chain too much. The disagreement D = A - B is what the single chain cannot see:
 D^2 / (v_A + v_B) is 1 on average when the links' variances are honest. Its running mean (the links' NEES,
 started from `prior_triangles` triangles at 1, so a few early triangles do not decide it) scales the gate a
 triangle must pass: link b is used only when |D| <= gate * sqrt(NEES * (v_A + v_B)) (LK on k-2's corners can
@@ -43,9 +46,13 @@ class HeightLinks:
     >>> fused = links.fuse(h_k2, h_k1, via_k1, via_k2)   # Heights; via_k2 None: the chain alone
     """
 
-    def __init__(self, prior_triangles: float = 5.0, gate: float = 3.0) -> None:
+    def __init__(self, prior_triangles: float = 5.0, gate: float = 3.0, shrink_variance: bool = False) -> None:
         self.prior_triangles = float(prior_triangles)
         self.gate = float(gate)
+        # the fused variance assumes the two paths' errors independent; an error of frame k's own view (its tilt
+        # coupled into its height) is common to both and unseen by the triangle, so by default the keyframe keeps
+        # the single chain's variance (what the height tracker's shrinkage is built on)
+        self.shrink_variance = bool(shrink_variance)
         self._sum_z = 0.0      # sum of D^2 / predicted variance over the triangles used
         self.used = 0          # triangles whose link b was fused
         self.rejected = 0      # triangles whose link b failed the gate
@@ -82,4 +89,6 @@ class HeightLinks:
         self.last = Triangle(d, total, True)
         step = (step_a * var_b + step_b * var_a) / total
         var = var_a * var_b / total
+        if not self.shrink_variance:
+            return Height(k2.metres * math.exp(step), k2.log_rel + step, via_k1.variance)
         return Height(k2.metres * math.exp(step), k2.log_rel + step, k2.variance + var)
