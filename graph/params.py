@@ -154,6 +154,14 @@ class RobustParams(Config):
                                             "residual tails of real graphs are heavier than chi-square")
     calibration_min_loops: int = setting(10, range="[1, inf)", unit="cycles",
                                          doc="calibrate only with at least this many agreeing cycles")
+    reach_tail: bool = setting(False, unit="flag",
+                               doc="after the decision, loops at most 2 x support_window steps apart (the span of the "
+                                   "agreeing cycles, where no map strain excuses a misfit) are judged at "
+                                   "fence_factor x the fence_quantile of the kept loops' r^2 (as a margin on the "
+                                   "variance factor, within [1, calibration_margin]) instead of calibration_margin, "
+                                   "and the loops are decided again with the first decision as one more start: false "
+                                   "loops a few steps apart fit the global margin (manhattan local 50 %); "
+                                   "graph.robust, docs/graph.md")
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")
