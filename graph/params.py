@@ -128,7 +128,8 @@ class RobustParams(Config):
     calibrate_noise: bool = True         # scale the thresholds of those rounds by `thresholds.fence_scale` of the
     #                                      kept loops (public graphs state information 10-1000x too loose)
     fence_factor: float = setting(10.0, range="[0, inf)",
-                                  doc="an inlier's r^2 is within this many times the kept loops' q-quantile ...")
+                                  doc="an inlier's r^2 is within this many times the kept loops' q-quantile (the "
+                                      "gate's settling rounds; consensus: the short-span margin of reach_tail) ...")
     fence_quantile: float = setting(0.9, range="[0, 1]", doc="... (heavy tails: a high quantile, not the median)")
     isolation_window: int = setting(5, range="[0, inf)")   # kept loops with no other kept loop within this many
     #                                      nodes at both ends get the standardized-residual test in those rounds
