@@ -63,16 +63,17 @@ def short_span(span: np.ndarray, window: int) -> np.ndarray:
 
 
 def tail_margin(r2_kept: np.ndarray, sigma0: float, dof: int, params: GraphParams) -> float:
-    """Acceptance margin (x the variance factor) from the tail of the kept loops' residuals at a solution:
-    `fence_factor` x their `fence_quantile` of r^2 / sigma0 over the chi-square quantile of the same level, clipped to
+    """Acceptance margin (x the variance factor) from the tail of the kept loops' residuals at a solution, such that
+    a loop is accepted within `fence_factor` x their `fence_quantile` of r^2 (the fence of `fence_scale`): that
+    r^2 over sigma0 x the chi-square quantile of the inlier test (`inlier_probability`), clipped to
     [1, calibration_margin]. The global margin (`calibration_margin`) is set against the median of the agreeing
     cycles, so it must also cover their heavy tail; the kept loops' own high quantile measures that tail, and the
-    same factor above it is the margin a loop needs. Never looser than the global margin, never tighter than the
-    calibrated quantile itself. Fewer than `calibration_min_loops` kept loops: the global margin."""
+    same factor above it is room enough. Never looser than the global margin, never tighter than the calibrated
+    quantile itself. Fewer than `calibration_min_loops` kept loops: the global margin."""
     r2 = np.asarray(r2_kept, float)
     margin = params.robust.calibration_margin
     if len(r2) < params.robust.calibration_min_loops or sigma0 <= 0:
         return margin
-    q = params.robust.fence_quantile
-    m = params.robust.fence_factor * float(np.quantile(r2 / sigma0, q)) / float(chi2.ppf(q, dof))
+    fence = params.robust.fence_factor * float(np.quantile(r2, params.robust.fence_quantile))
+    m = fence / (sigma0 * base_threshold(dof, params))
     return float(np.clip(m, 1.0, max(margin, 1.0)))

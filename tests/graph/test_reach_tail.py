@@ -53,7 +53,10 @@ def test_tail_margin_bounds_and_short_span():
     # residuals as the stated model predicts (or heavier): the factor x their quantile reaches the global margin
     assert tail_margin(2.0 * r2, 1.0, 3, p) == pytest.approx(p.robust.calibration_margin)
     assert tail_margin(0.01 * r2, 1.0, 3, p) == pytest.approx(1.0)              # never below the quantile itself
-    assert 1.0 < tail_margin(0.2 * r2, 1.0, 3, p) < p.robust.calibration_margin
+    m = tail_margin(0.5 * r2, 1.0, 3, p)
+    assert 1.0 < m < p.robust.calibration_margin
+    # a short-span loop is accepted within fence_factor x the kept loops' fence_quantile of r^2
+    assert m * 11.345 == pytest.approx(p.robust.fence_factor * np.quantile(0.5 * r2, p.robust.fence_quantile), rel=1e-3)
     assert tail_margin(r2[:3], 1.0, 3, p) == p.robust.calibration_margin         # too few kept loops: global
     assert short_span(np.array([1, 20, 21]), 10).tolist() == [True, True, False]
 
