@@ -285,6 +285,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         notes.append(f"variance factor {sigma0:.3g}: thresholds x {scale:.3g}")
     init_seconds = time.perf_counter() - t0
     initial_cost = float(built.graph().error(odometry_values))
+
     def decide(c2: np.ndarray, extra: gtsam.Values | None = None):
         """Steps 2-4 with thresholds c2: (values, inlier, LM iterations, end of the GNC stage). `extra`: one more
         start, taken by TLS descent (graph.kernel_start) and compared with the others by the TLS objective."""
