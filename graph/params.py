@@ -128,7 +128,8 @@ class RobustParams(Config):
     calibrate_noise: bool = True         # scale the thresholds of those rounds by `thresholds.fence_scale` of the
     #                                      kept loops (public graphs state information 10-1000x too loose)
     fence_factor: float = setting(10.0, range="[0, inf)",
-                                  doc="an inlier's r^2 is within this many times the kept loops' q-quantile ...")
+                                  doc="an inlier's r^2 is within this many times the kept loops' q-quantile (the "
+                                      "gate's settling rounds; consensus: the short-span margin of reach_tail) ...")
     fence_quantile: float = setting(0.9, range="[0, 1]", doc="... (heavy tails: a high quantile, not the median)")
     isolation_window: int = setting(5, range="[0, inf)")   # kept loops with no other kept loop within this many
     #                                      nodes at both ends get the standardized-residual test in those rounds
@@ -168,6 +169,14 @@ class RobustParams(Config):
                                              "2 s); 0: the blocks of the summed covariance")
     calibration_min_loops: int = setting(10, range="[1, inf)", unit="cycles",
                                          doc="calibrate only with at least this many agreeing cycles")
+    reach_tail: bool = setting(False, unit="flag",
+                               doc="after the decision, loops at most 2 x support_window steps apart (the span of the "
+                                   "agreeing cycles, where no map strain excuses a misfit) are judged at "
+                                   "fence_factor x the fence_quantile of the kept loops' r^2 (as a margin on the "
+                                   "variance factor, within [1, calibration_margin]) instead of calibration_margin, "
+                                   "and the loops are decided again with the first decision as one more start: false "
+                                   "loops a few steps apart fit the global margin (manhattan local 50 %); "
+                                   "graph.robust, docs/graph.md")
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")

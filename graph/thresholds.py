@@ -52,3 +52,28 @@ def fence_scale(r2_inliers: np.ndarray, dof: int, factor: float, quantile: float
     if len(r2) < min_loops:
         return 1.0
     return float(np.clip(factor * np.quantile(r2, quantile) / chi2.ppf(quantile, dof), floor, 1.0))
+
+
+def short_span(span: np.ndarray, window: int) -> np.ndarray:
+    """Loops whose ends are at most 2 x `window` odometry steps apart: the longest cycle the local consistency test
+    (graph.support, both ends within `window` nodes) closes, so over such a span the variance factor measured on the
+    agreeing cycles describes the loop's own residual, and no map-scale strain (a long drift a lone loop closes)
+    excuses a misfit."""
+    return np.asarray(span) <= 2 * max(int(window), 0)
+
+
+def tail_margin(r2_kept: np.ndarray, sigma0: float, dof: int, params: GraphParams) -> float:
+    """Acceptance margin (x the variance factor) from the tail of the kept loops' residuals at a solution, such that
+    a loop is accepted within `fence_factor` x their `fence_quantile` of r^2 (the fence of `fence_scale`): that
+    r^2 over sigma0 x the chi-square quantile of the inlier test (`inlier_probability`), clipped to
+    [1, calibration_margin]. The global margin (`calibration_margin`) is set against the median of the agreeing
+    cycles, so it must also cover their heavy tail; the kept loops' own high quantile measures that tail, and the
+    same factor above it is room enough. Never looser than the global margin, never tighter than the calibrated
+    quantile itself. Fewer than `calibration_min_loops` kept loops: the global margin."""
+    r2 = np.asarray(r2_kept, float)
+    margin = params.robust.calibration_margin
+    if len(r2) < params.robust.calibration_min_loops or sigma0 <= 0:
+        return margin
+    fence = params.robust.fence_factor * float(np.quantile(r2, params.robust.fence_quantile))
+    m = fence / (sigma0 * base_threshold(dof, params))
+    return float(np.clip(m, 1.0, max(margin, 1.0)))

@@ -52,6 +52,13 @@ def ours_isam2(data: PoseGraphData, params: GraphParams | None = None) -> Method
     return MethodRun(res.poses, np.asarray(res.loop_inlier, bool), time.perf_counter() - t0)
 
 
+def ours_tail(on: bool):
+    """Ours with `robust.reach_tail` set either way (the default's other side, side by side in one run)."""
+    def run(data: PoseGraphData) -> MethodRun:
+        return ours(data, GraphParams().replace(robust={"reach_tail": on}))
+    return run
+
+
 def plain_lm(data: PoseGraphData) -> MethodRun:
     t0 = time.perf_counter()
     res = optimize(data, GraphParams.preset("least_squares"))
@@ -99,6 +106,7 @@ def g2o_dcs(data: PoseGraphData, phi: float = DCS_PHI) -> MethodRun:
     return MethodRun(poses, kept, seconds)
 
 
-METHODS = {"ours": ours, "ours-isam2": ours_isam2, "gtsam-gnc": gtsam_gnc, "dcs": dcs, "g2o-dcs": g2o_dcs, "plain-lm": plain_lm}
+METHODS = {"ours": ours, "ours-isam2": ours_isam2, "ours-tail-off": ours_tail(False), "ours-tail-on": ours_tail(True),
+            "gtsam-gnc": gtsam_gnc, "dcs": dcs, "g2o-dcs": g2o_dcs, "plain-lm": plain_lm}
 # peers run on contaminated graphs only up to --peer-max-nodes (minutes per row beyond)
 PEERS_LIMITED = ("gtsam-gnc", "plain-lm", "g2o-dcs")
