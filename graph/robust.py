@@ -50,7 +50,7 @@ def _weighted(base_factors: list, loops: list, weights: np.ndarray) -> gtsam.Non
 
 
 def _lm(graph, values, params: GraphParams, iterations: int):
-    p = lm_params(params, iterations)
+    p = lm_params(params, iterations, graph)
     opt = gtsam.LevenbergMarquardtOptimizer(graph, values, p)
     return opt.optimize(), int(opt.iterations())
 
