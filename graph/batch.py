@@ -80,6 +80,13 @@ class BuiltGraph:
             return squared_residuals(self.loops, values)
         return self.residuals(values)
 
+    def pairs(self, keep: np.ndarray | None = None) -> np.ndarray:
+        """(E, 2) node pairs of the graph's factors (anchor priors as (k, k)), for graph.linear's fill-in estimate."""
+        loops = self.loop_idx if keep is None else self.loop_idx[np.asarray(keep, bool)]
+        idx = np.concatenate([self.odo_idx, loops])
+        anchors = np.asarray(self.anchors, np.int64)
+        return np.vstack([np.column_stack([anchors, anchors]), np.column_stack([self.a[idx], self.b[idx]])])
+
     def graph(self, keep: np.ndarray | None = None) -> gtsam.NonlinearFactorGraph:
         loops = self.loops if keep is None else [f for f, k in zip(self.loops, keep.tolist()) if k]
         return graph_of(self.priors + self.odometry + loops)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import contextvars
 import hashlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 import gtsam
@@ -28,7 +28,7 @@ import numpy as np
 
 from graph.params import GraphParams
 
-_SCOPE: contextvars.ContextVar["SolverScope | None"] = contextvars.ContextVar("graph_linear_scope", default=None)
+_SCOPE: contextvars.ContextVar["SolverScope | _AllDirect | None"] = contextvars.ContextVar("graph_linear_scope", default=None)
 
 
 def fill_cost(pairs: np.ndarray, dim: int) -> float:
@@ -67,6 +67,19 @@ def graph_pairs(graph: gtsam.NonlinearFactorGraph) -> np.ndarray:
             continue
         n += 1
     return out[:n]
+
+
+class _AllDirect:
+    """A scope in which every call is direct (see `narrow`)."""
+
+    all_direct = True
+
+    @staticmethod
+    def iterative(graph: gtsam.NonlinearFactorGraph) -> bool:
+        return False
+
+
+_DIRECT = _AllDirect()
 
 
 class SolverScope:
@@ -123,6 +136,23 @@ def solver_scope(pairs: np.ndarray, dim: int, params: GraphParams) -> Iterator[S
     token = _SCOPE.set(scope)
     try:
         yield scope
+    finally:
+        _SCOPE.reset(token)
+
+
+@contextmanager
+def narrow(pairs: Callable[[], np.ndarray]) -> Iterator[None]:
+    """Inside the block every LM call's graph is a subgraph of the edges `pairs()` (a caller's promise): when those
+    are under the limit every call is direct without an estimate of its own (the GNC steps of a solve whose false
+    loops are all outside its candidates: city10000 at 50 % random). No-op outside a scope or when the scope is
+    all direct; `pairs` is only called when needed."""
+    outer = _SCOPE.get()
+    if outer is None or outer.all_direct:
+        yield
+        return
+    token = _SCOPE.set(_DIRECT if not outer._estimate(np.asarray(pairs())) else outer)
+    try:
+        yield
     finally:
         _SCOPE.reset(token)
 

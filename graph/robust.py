@@ -20,6 +20,7 @@
 from __future__ import annotations
 
 import time
+from contextlib import ExitStack
 
 import gtsam
 import numpy as np
@@ -29,6 +30,7 @@ from graph.batch import BuiltGraph, build, initial_guess, lm_params, resolve_ini
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.gnc import tls_weights
 from graph.kernel_start import dcs_solve, tls_descent
+from graph.linear import narrow
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.polish import polish
@@ -240,6 +242,12 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     supported = np.zeros(L, bool)
     supported[pairs[0]] = True
     supported[pairs[1]] = True
+    # GNC over the supported loops only: an unsupported loop is tested once the map is solved (step 4). This keeps
+    # random long-range loops out of every inner solve (their fill-in is what makes a joint solve slow)
+    cand = supported if params.robust.support_window > 0 else np.ones(L, bool)
+    # every solve of the starts holds candidates only: one fill-in estimate for all of them (graph.linear)
+    narrowed = ExitStack()
+    narrowed.enter_context(narrow(lambda: built.pairs(cand)))
     # 2. starts: least squares on the supported loops from LAGO / chordal; the odometry chain
     odometry_values = values_from_array(data.dim, initial_guess(data, built, InitMethod.ODOMETRY))
     starts = []
@@ -265,9 +273,6 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     initial_cost = float(built.graph().error(odometry_values))
     best = None
     iters = 0
-    # GNC over the supported loops only: an unsupported loop is tested once the map is solved (step 4). This keeps
-    # random long-range loops out of every inner solve (their fill-in is what makes a joint solve slow)
-    cand = supported if params.robust.support_window > 0 else np.ones(L, bool)
     sub = built.subset(cand)
     _, sub_label = np.unique(label[cand], return_inverse=True)
 
@@ -310,6 +315,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             notes.append("DCS-kernel start skipped: both GNC starts kept the same loops")
     else:
         notes.append("odometry start skipped: every supported loop fits at the supported start")
+    narrowed.close()
     _, values, inlier, _ = best
     t_gnc = time.perf_counter()
     # 4. polish; admit the loops that fit at the solution; try the unsupported loops closest to fitting jointly
@@ -336,16 +342,18 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         # would see the drift as their residual
         pool = inlier | trial
         sub = built.subset(pool)
-        v, kept, outer, it = gnc_tls(base, sub, values, c2[pool], np.arange(int(pool.sum())), params)
+        with narrow(lambda: built.pairs(pool)):
+            v, kept, outer, it = gnc_tls(base, sub, values, c2[pool], np.arange(int(pool.sum())), params)
         iters += it
         new_inlier = np.zeros(L, bool)
         new_inlier[pool] = kept
         if tls_objective(base_graph, built, v, c2) <= tls_objective(base_graph, built, values, c2):
             # the trial may push out a loop kept so far (a false trial loop pulls through GNC's surrogate):
             # one joint re-solve with those back (graph.readmit)
-            v, new_inlier, it = readmit_dropped(built, v, new_inlier, inlier, c2,
-                                                lambda x: tls_objective(base_graph, built, x, c2),
-                                                lambda g, x, n: _lm(g, x, params, n), params, notes)
+            with narrow(lambda: built.pairs(pool)):
+                v, new_inlier, it = readmit_dropped(built, v, new_inlier, inlier, c2,
+                                                    lambda x: tls_objective(base_graph, built, x, c2),
+                                                    lambda g, x, n: _lm(g, x, params, n), params, notes)
             iters += it
             values, inlier = v, new_inlier
             notes.append(f"{int(trial.sum())} unsupported loops tried jointly: {int((kept & trial[pool]).sum())} kept")
