@@ -73,6 +73,7 @@ class _AllDirect:
     """A scope in which every call is direct (see `narrow`)."""
 
     all_direct = True
+    iterative_calls = 0
 
     @staticmethod
     def iterative(graph: gtsam.NonlinearFactorGraph) -> bool:
@@ -87,7 +88,7 @@ class SolverScope:
 
     KNOWN = 8        # edge sets remembered on each side of the limit (subset / superset tests per call)
 
-    def __init__(self, pairs: np.ndarray, dim: int, params: GraphParams):
+    def __init__(self, pairs: np.ndarray | Callable[[], np.ndarray], dim: int, params: GraphParams):
         self.dim = dim
         self.limit = float(params.solver.direct_max_cost)
         self.params = params
@@ -96,7 +97,8 @@ class SolverScope:
         self._dear: list[tuple[int, np.ndarray]] = []     # ... and above it
         self.iterative_calls = 0
         # the whole graph under the limit: every call direct, no estimate per call
-        self.all_direct = not np.isfinite(self.limit) or fill_cost(pairs, dim) <= self.limit
+        self.all_direct = not np.isfinite(self.limit) or fill_cost(pairs() if callable(pairs) else pairs, dim) \
+            <= self.limit
 
     def iterative(self, graph: gtsam.NonlinearFactorGraph) -> bool:
         """Whether an LM call on `graph` should use PCG."""
@@ -130,8 +132,14 @@ class SolverScope:
 
 
 @contextmanager
-def solver_scope(pairs: np.ndarray, dim: int, params: GraphParams) -> Iterator[SolverScope]:
-    """Every LM call made through `configure` inside the block chooses its linear solver from `pairs`' scope."""
+def solver_scope(pairs: np.ndarray | Callable[[], np.ndarray], dim: int, params: GraphParams
+                 ) -> Iterator["SolverScope | _AllDirect"]:
+    """Every LM call made through `configure` inside the block chooses its linear solver from `pairs`' scope.
+    Inside a scope already open (the robust solve behind a batch strategy's solve) the outer one holds."""
+    outer = _SCOPE.get()
+    if outer is not None:
+        yield outer
+        return
     scope = SolverScope(pairs, dim, params)
     token = _SCOPE.set(scope)
     try:

@@ -30,7 +30,7 @@ from graph.batch import BuiltGraph, build, initial_guess, lm_params, resolve_ini
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.gnc import tls_weights
 from graph.kernel_start import dcs_solve, tls_descent
-from graph.linear import narrow
+from graph.linear import narrow, solver_scope
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.polish import polish
@@ -226,6 +226,13 @@ def _drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFa
 
 
 def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
+    """The consensus solve (module doc); every LM call in it picks its linear solver by fill-in (graph.linear)."""
+    a, b = data.edge_index_pairs()
+    with solver_scope(lambda: np.column_stack([a, b]), data.dim, params):
+        return _robust_solve(data, params)
+
+
+def _robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     t_start = time.perf_counter()
     built = build(data, params.replace(robust="none"))
     L = len(built.loops)
