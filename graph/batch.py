@@ -31,6 +31,7 @@ from graph.factors import (
 )
 from graph.gnc import gnc_optimize
 from graph.initial import InitialGuessError, chordal_guess, lago_guess, spanning_tree_guess
+from graph.linear import configure
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GncImpl, GncLoss, GraphParams, InitMethod, RobustMode
 from graph.residuals import LoopResiduals
@@ -78,6 +79,13 @@ class BuiltGraph:
         if self.residuals is None:
             return squared_residuals(self.loops, values)
         return self.residuals(values)
+
+    def pairs(self, keep: np.ndarray | None = None) -> np.ndarray:
+        """(E, 2) node pairs of the graph's factors (anchor priors as (k, k)), for graph.linear's fill-in estimate."""
+        loops = self.loop_idx if keep is None else self.loop_idx[np.asarray(keep, bool)]
+        idx = np.concatenate([self.odo_idx, loops])
+        anchors = np.asarray(self.anchors, np.int64)
+        return np.vstack([np.column_stack([anchors, anchors]), np.column_stack([self.a[idx], self.b[idx]])])
 
     def graph(self, keep: np.ndarray | None = None) -> gtsam.NonlinearFactorGraph:
         loops = self.loops if keep is None else [f for f, k in zip(self.loops, keep.tolist()) if k]
@@ -130,16 +138,18 @@ def _diagonal_factors(data: PoseGraphData, built: BuiltGraph) -> list:
     return out
 
 
-def lm_params(params: GraphParams, max_iter: int | None = None) -> gtsam.LevenbergMarquardtParams:
+def lm_params(params: GraphParams, max_iter: int | None = None,
+              graph: gtsam.NonlinearFactorGraph | None = None) -> gtsam.LevenbergMarquardtParams:
+    """LM parameters of a batch solve; with `graph`, the linear solver is chosen for it (graph.linear)."""
     p = gtsam.LevenbergMarquardtParams()
     p.setMaxIterations(params.solver.lm_max_iterations if max_iter is None else max_iter)
     p.setRelativeErrorTol(params.solver.lm_relative_tol)
     p.setAbsoluteErrorTol(params.solver.lm_absolute_tol)
-    return p
+    return configure(p, graph)
 
 
 def _lm(graph, values, params: GraphParams) -> tuple[gtsam.Values, int]:
-    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(params))
+    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(params, graph=graph))
     return opt.optimize(), int(opt.iterations())
 
 
@@ -230,7 +240,7 @@ def solve(data: PoseGraphData, params: GraphParams, candidates: np.ndarray | Non
         notes.append("gtsam.GncLMOptimizer: iteration count not exposed")
     else:
         g = graph_of(built.priors + built.odometry + robust_loop_factors(sub.loops, params.robust.method, params))
-        opt = gtsam.LevenbergMarquardtOptimizer(g, init_values, lm_params(params))
+        opt = gtsam.LevenbergMarquardtOptimizer(g, init_values, lm_params(params, graph=g))
         values = opt.optimize()
         iters = int(opt.iterations())
         initial_cost, final_cost = float(g.error(init_values)), float(g.error(values))

@@ -16,6 +16,7 @@ import gtsam
 import numpy as np
 
 from graph.factors import squared_residuals
+from graph.linear import configure
 from graph.params import GncLoss
 
 _DEBUG = bool(os.environ.get("GRAPH_GNC_DEBUG"))
@@ -83,6 +84,7 @@ def _lm(graph, values, max_iter: int, rel_tol: float, abs_tol: float) -> tuple[g
     p.setMaxIterations(max_iter)
     p.setRelativeErrorTol(rel_tol)
     p.setAbsoluteErrorTol(abs_tol)
+    configure(p, graph)
     opt = gtsam.LevenbergMarquardtOptimizer(graph, values, p)
     return opt.optimize(), int(opt.iterations())
 

@@ -30,7 +30,8 @@ def dcs_solve(base: list, loops: list, values: gtsam.Values, phi: float, params:
     every loop; `base` (anchor + odometry) plain. phi: squared Mahalanobis residual in the loops' stated units."""
     kernel = gtsam.noiseModel.mEstimator.DCS.Create(phi)
     robust = [f.cloneWithNewNoiseModel(gtsam.noiseModel.Robust.Create(kernel, f.noiseModel())) for f in loops]
-    opt = gtsam.LevenbergMarquardtOptimizer(graph_of(base + robust), values, lm_params(params))
+    g = graph_of(base + robust)
+    opt = gtsam.LevenbergMarquardtOptimizer(g, values, lm_params(params, graph=g))
     return opt.optimize()
 
 
@@ -44,7 +45,7 @@ def tls_descent(base: list, loops: BuiltGraph, values: gtsam.Values, c2: np.ndar
     solves = 0
     for _ in range(rounds):
         g = graph_of(base + [f for f, k in zip(loops.loops, kept.tolist()) if k])
-        values = gtsam.LevenbergMarquardtOptimizer(g, values, lm_params(params)).optimize()
+        values = gtsam.LevenbergMarquardtOptimizer(g, values, lm_params(params, graph=g)).optimize()
         solves += 1
         new = loops.r2(values) <= c2
         if np.array_equal(new, kept):

@@ -17,6 +17,7 @@ import numpy as np
 from graph.components import anchor_components
 from graph.errors import GraphError
 from graph.incremental import IncrementalPoseGraph, full_pass, replay
+from graph.linear import solver_scope
 from graph.model import PoseGraphData
 from graph.params import GraphParams, InitMethod, RobustMode, Solver
 from graph.pose_graph import PoseGraph
@@ -143,7 +144,14 @@ class BatchStrategy(GraphStrategy):
 
     @classmethod
     def solve(cls, data: PoseGraphData, params: GraphParams) -> GraphResult:
-        return loop_rejector(data, params).solve(data, params)
+        # every LM call of the solve picks direct Cholesky or PCG from its fill-in (graph.linear)
+        a, b = data.edge_index_pairs()
+        with solver_scope(np.column_stack([a, b]), data.dim, params) as scope:
+            res = loop_rejector(data, params).solve(data, params)
+        if scope.iterative_calls:
+            res.notes.append(f"linear solver: PCG in {scope.iterative_calls} LM calls whose direct factorisation "
+                             f"was estimated above {params.solver.direct_max_cost:.3g} flops")
+        return res
 
     def add_node(self, node_id: int, guess: np.ndarray | None) -> None:
         self._graph.add_node(node_id, guess)

@@ -20,6 +20,7 @@
 from __future__ import annotations
 
 import time
+from contextlib import ExitStack
 
 import gtsam
 import numpy as np
@@ -30,6 +31,7 @@ from graph.calibration import scalar_factor, scale_information, split_factors
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.gnc import tls_weights
 from graph.kernel_start import dcs_solve, tls_descent
+from graph.linear import narrow, solver_scope
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.polish import polish
@@ -51,7 +53,7 @@ def _weighted(base_factors: list, loops: list, weights: np.ndarray) -> gtsam.Non
 
 
 def _lm(graph, values, params: GraphParams, iterations: int):
-    p = lm_params(params, iterations)
+    p = lm_params(params, iterations, graph)
     opt = gtsam.LevenbergMarquardtOptimizer(graph, values, p)
     return opt.optimize(), int(opt.iterations())
 
@@ -249,6 +251,13 @@ def _reach_tail(data: PoseGraphData, built, values: gtsam.Values, inlier: np.nda
 
 
 def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
+    """The consensus solve (module doc); every LM call in it picks its linear solver by fill-in (graph.linear)."""
+    a, b = data.edge_index_pairs()
+    with solver_scope(lambda: np.column_stack([a, b]), data.dim, params):
+        return _robust_solve(data, params)
+
+
+def _robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     t_start = time.perf_counter()
     stated = build(data, params.replace(robust="none"))
     dof = TANGENT_DIM[data.dim]
@@ -277,6 +286,12 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     supported = np.zeros(L, bool)
     supported[pairs[0]] = True
     supported[pairs[1]] = True
+    # GNC over the supported loops only: an unsupported loop is tested once the map is solved (step 4). This keeps
+    # random long-range loops out of every inner solve (their fill-in is what makes a joint solve slow)
+    cand = supported if params.robust.support_window > 0 else np.ones(L, bool)
+    # every solve of the starts holds candidates only: one fill-in estimate for all of them (graph.linear)
+    narrowed = ExitStack()
+    narrowed.enter_context(narrow(lambda: built.pairs(cand)))
     # 2. starts: least squares on the supported loops from LAGO / chordal; the odometry chain
     odometry_values = values_from_array(data.dim, initial_guess(data, stated, InitMethod.ODOMETRY))
     starts = []
@@ -306,6 +321,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         scale = params.robust.calibration_margin * sigma0
         c2 = c2 * scale
         notes.append(f"variance factor {sigma0:.3g}: thresholds x {scale:.3g}")
+    narrowed.close()
     init_seconds = time.perf_counter() - t0
     initial_cost = float(stated.graph().error(odometry_values))
 
@@ -314,9 +330,6 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         start, taken by TLS descent (graph.kernel_start) and compared with the others by the TLS objective."""
         best = None
         iters = 0
-        # GNC over the supported loops only: an unsupported loop is tested once the map is solved (step 4). This keeps
-        # random long-range loops out of every inner solve (their fill-in is what makes a joint solve slow)
-        cand = supported if params.robust.support_window > 0 else np.ones(L, bool)
         sub = built.subset(cand)
         _, sub_label = np.unique(label[cand], return_inverse=True)
 
@@ -336,6 +349,9 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
                 best = (f, values, inlier, outer == 0 and bool(kept.all()))
             return inlier
 
+        # every solve of the starts holds candidates only: one fill-in estimate for all of them (graph.linear)
+        stage = ExitStack()
+        stage.enter_context(narrow(lambda: built.pairs(cand)))
         for name, v0 in starts:
             run(name, v0)
         if best is None or (params.robust.odometry_start and not best[3]):
@@ -363,6 +379,7 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             # the earlier decision, re-judged under these thresholds: the tightened test must not swap a start that
             # won for one that lost (manhattan random-grouped 30 %, seed 3: 0.8 -> 24 m without it)
             run("previous decision", extra, descent=True)
+        stage.close()
         _, values, inlier, _ = best
         t_gnc = time.perf_counter()
         # 4. polish; admit the loops that fit at the solution; try the unsupported loops closest to fitting jointly
@@ -389,16 +406,18 @@ def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             # would see the drift as their residual
             pool = inlier | trial
             sub = built.subset(pool)
-            v, kept, outer, it = gnc_tls(base, sub, values, c2[pool], np.arange(int(pool.sum())), params)
+            with narrow(lambda: built.pairs(pool)):
+                v, kept, outer, it = gnc_tls(base, sub, values, c2[pool], np.arange(int(pool.sum())), params)
             iters += it
             new_inlier = np.zeros(L, bool)
             new_inlier[pool] = kept
             if tls_objective(base_graph, built, v, c2) <= tls_objective(base_graph, built, values, c2):
                 # the trial may push out a loop kept so far (a false trial loop pulls through GNC's surrogate):
                 # one joint re-solve with those back (graph.readmit)
-                v, new_inlier, it = readmit_dropped(built, v, new_inlier, inlier, c2,
-                                                    lambda x: tls_objective(base_graph, built, x, c2),
-                                                    lambda g, x, n: _lm(g, x, params, n), params, notes)
+                with narrow(lambda: built.pairs(pool)):
+                    v, new_inlier, it = readmit_dropped(built, v, new_inlier, inlier, c2,
+                                                        lambda x: tls_objective(base_graph, built, x, c2),
+                                                        lambda g, x, n: _lm(g, x, params, n), params, notes)
                 iters += it
                 values, inlier = v, new_inlier
                 notes.append(f"{int(trial.sum())} unsupported loops tried jointly: {int((kept & trial[pool]).sum())} kept")

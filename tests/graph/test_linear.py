@@ -1,0 +1,60 @@
+"""The linear solver choice of batch LM (graph.linear): direct Cholesky below the estimated fill-in cost, PCG above;
+either way the solve reaches the same optimum."""
+from __future__ import annotations
+
+import numpy as np
+
+from graph import GraphParams
+from graph.linear import fill_cost
+from graph.optimizer import optimize
+from odometry.shared.poses import between, compose
+from tests.graph.synth import ate, noisy_graph, square_laps
+
+
+def _long_range(seed: int = 5, extra: int = 60):
+    """Four laps of a square (revisit loops one lap apart) plus `extra` true loops between random pose pairs."""
+    truth = square_laps(laps=4, side=10)
+    rng = np.random.default_rng(seed)
+    data, _ = noisy_graph(truth, rng, sigma_xy=0.05, sigma_th=0.02)
+    n = len(truth)
+    i = rng.integers(0, n, extra)
+    j = (i + rng.integers(20, n - 20, extra)) % n
+    z = compose(between(truth[j], truth[i]), rng.normal(0.0, [0.05, 0.05, 0.02], size=(extra, 3)))
+    info = np.linalg.inv(np.diag([0.05 ** 2, 0.05 ** 2, 0.02 ** 2]))
+    out = data.append_edges(data.node_ids[j], data.node_ids[i], z, np.broadcast_to(info, (extra, 3, 3)),
+                            np.ones(extra, bool), np.full(extra, np.nan))
+    return out, truth
+
+
+def test_fill_cost_grows_with_long_range_loops():
+    n = 400
+    chain = np.column_stack([np.arange(n - 1), np.arange(1, n)])
+    rng = np.random.default_rng(0)
+    far = rng.integers(0, n, (200, 2))
+    far = far[far[:, 0] != far[:, 1]]
+    c_chain = fill_cost(chain, 2)
+    # a chain eliminates with one neighbour per node: ~ n x 27 x 2^2
+    assert c_chain <= 27 * 4 * n
+    assert fill_cost(np.vstack([chain, far]), 2) > 20 * c_chain
+    assert fill_cost(chain, 3) > c_chain          # 6-dof blocks cost more than 3-dof ones
+
+
+def test_default_limit_changes_nothing_on_a_small_graph():
+    data, _ = _long_range()
+    a = optimize(data, GraphParams())
+    b = optimize(data, GraphParams().replace(solver={"direct_max_cost": float("inf")}))
+    assert np.array_equal(a.loop_inlier, b.loop_inlier)
+    assert np.array_equal(a.poses, b.poses)
+
+
+def test_iterative_solve_reaches_the_direct_optimum():
+    data, truth = _long_range()
+    for robust in ("none", "consensus"):
+        direct = optimize(data, GraphParams(robust=robust).replace(solver={"direct_max_cost": float("inf")}))
+        pcg = optimize(data, GraphParams(robust=robust).replace(solver={"direct_max_cost": 0.0}))
+        assert np.array_equal(direct.loop_inlier, pcg.loop_inlier)
+        assert direct.loop_inlier.all()
+        # same optimum: the maps agree far below their error against the truth
+        assert ate(direct.poses, pcg.poses) < 1e-3
+        assert abs(ate(truth, pcg.poses) - ate(truth, direct.poses)) < 1e-3
+        assert abs(pcg.final_cost - direct.final_cost) <= 1e-3 * direct.final_cost
