@@ -57,6 +57,19 @@ def _quadratic_parts(e: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return a, b, c, rot
 
 
+def _root_log_factor(excess, guess: float, xtol: float) -> float | None:
+    """exp of the root of `excess` (decreasing in the log factor) bracketed outwards from `guess` in steps of
+    e^2; None when no sign change is found within e^+-40 of it."""
+    lo, hi = guess - 2.0, guess + 2.0
+    for _ in range(20):
+        if excess(lo) > 0 > excess(hi):
+            break
+        lo, hi = lo - 2.0, hi + 2.0
+    else:
+        return None
+    return float(np.exp(brentq(excess, lo, hi, xtol=xtol)))
+
+
 def split_factors(cycles: CycleSupport) -> VarianceFactors | None:
     """Rotation and translation variance factors of 3D cycles (see the module doc); None when the rotation part
     carries no error (a noiseless graph: nothing to split). With the cycle covariances decomposed by the source of
@@ -80,15 +93,8 @@ def split_factors(cycles: CycleSupport) -> VarianceFactors | None:
     # the bracket of the root search; the conditional part falls as s_t grows
     marginal = float(np.median(a)) / med3
     guess = np.log(marginal) if np.isfinite(marginal) and marginal > 0 else np.log(s_r)
-    lo, hi = guess - 2.0, guess + 2.0
-    for _ in range(20):
-        if excess(lo) > 0 > excess(hi):
-            break
-        lo, hi = lo - 2.0, hi + 2.0
-    else:
-        return None
-    s_t = float(np.exp(brentq(excess, lo, hi, xtol=1e-10)))
-    return VarianceFactors(s_t, s_r, scalar_factor(cycles, 6))
+    s_t = _root_log_factor(excess, guess, 1e-10)
+    return None if s_t is None else VarianceFactors(s_t, s_r, scalar_factor(cycles, 6))
 
 
 def _split_propagated(cycles: CycleSupport) -> VarianceFactors | None:
@@ -111,15 +117,8 @@ def _split_propagated(cycles: CycleSupport) -> VarianceFactors | None:
     et = e[:, :3]
     marginal = float(np.median(np.einsum("ni,ni->n", et, np.linalg.solve(s_t_part[:, :3, :3], et[..., None])[..., 0])))
     guess = np.log(marginal / med3) if marginal > 0 else np.log(s_r)
-    lo, hi = guess - 2.0, guess + 2.0
-    for _ in range(20):
-        if excess(lo) > 0 > excess(hi):
-            break
-        lo, hi = lo - 2.0, hi + 2.0
-    else:
-        return None
-    s_t = float(np.exp(brentq(excess, lo, hi, xtol=1e-6)))
-    return VarianceFactors(s_t, s_r, scalar_factor(cycles, 6))
+    s_t = _root_log_factor(excess, guess, 1e-6)
+    return None if s_t is None else VarianceFactors(s_t, s_r, scalar_factor(cycles, 6))
 
 
 def scale_information(data: PoseGraphData, factors: VarianceFactors) -> PoseGraphData:
