@@ -2,9 +2,8 @@
 GNC's convex surrogate is bent by them from both consensus starts, and the third start (graph.kernel_start: a DCS
 solve from the odometry chain, then TLS descent) is what finds the clean solution."""
 import numpy as np
-import pytest
 
-from graph import GraphParams, read_graph
+from graph import GraphParams
 from graph.factors import graph_of, squared_residuals, values_from_array
 from graph.kernel_start import dcs_solve, tls_descent
 from graph.robust import robust_solve
@@ -35,16 +34,6 @@ def test_tls_descent_from_a_kernel_solve_drops_a_false_group():
     # the descent never ends above its start in the TLS objective
     assert float(graph_of(base).error(v)) + 0.5 * np.minimum(squared_residuals(built.loops, v), c2).sum() <= \
         float(graph_of(base).error(odo)) + 0.5 * np.minimum(squared_residuals(built.loops, odo), c2).sum()
-
-
-@pytest.fixture(scope="module")
-def manhattan(shared_data):
-    root = shared_data / "posegraphs" / "vertigo_from_pyslam" / "manhattan"
-    g, t = root / "originalDataset" / "g2o" / "manhattanOlson3500.g2o", \
-        root / "groundTruth" / "manhattanOlson3500_nodes_groundTruth.dat"
-    if not (g.exists() and t.exists()):
-        pytest.skip(f"{g} or its ground truth not present")
-    return read_graph(g), np.loadtxt(t, ndmin=2)[:, -3:]
 
 
 def test_manhattan_random_grouped_tuning_draw(manhattan):

@@ -61,17 +61,6 @@ def test_tail_margin_bounds_and_short_span():
     assert short_span(np.array([1, 20, 21]), 10).tolist() == [True, True, False]
 
 
-@pytest.fixture(scope="module")
-def manhattan(shared_data):
-    from graph import read_graph
-    root = shared_data / "posegraphs" / "vertigo_from_pyslam" / "manhattan"
-    g, t = root / "originalDataset" / "g2o" / "manhattanOlson3500.g2o", \
-        root / "groundTruth" / "manhattanOlson3500_nodes_groundTruth.dat"
-    if not (g.exists() and t.exists()):
-        pytest.skip(f"{g} or its ground truth not present")
-    return read_graph(g), np.loadtxt(t, ndmin=2)[:, -3:]
-
-
 def test_manhattan_local_50_with_reach_tail(manhattan):
     # seed 3 (a reporting draw of the bench; seed 1 tuned): without the setting 4 wrong loops are kept (0.8133 m)
     from vslam.bench.graph_outliers import add_false_loops
