@@ -117,8 +117,8 @@ class SolverScope:
         # GNC steps of one solve drop and re-weight the same loops, so most calls are settled without an
         # elimination (0.1-0.4 s each on 10^4 nodes with the false groups in)
         p = np.sort(pairs, axis=1)
-        codes = np.unique(p[:, 0] * (int(p.max()) + 1 if len(p) else 1) + p[:, 1])
         width = int(p.max()) + 1 if len(p) else 1
+        codes = np.unique(p[:, 0] * width + p[:, 1])
         for known_width, known in self._cheap:
             if known_width == width and np.isin(codes, known, assume_unique=True).all():
                 return False
