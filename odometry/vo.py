@@ -590,9 +590,7 @@ class VisualOdometry:
         mean, bound = cv_kc
         if bound > 0.5 * c.lk_window:
             return False
-        d = t_kc - mean
-        off = math.hypot(d[0], d[1]) / self._m_per_px + abs(wrap_angle(d[2])) * 0.5 * max(self.camera.size)
-        return off <= bound + c.orb_threshold_px
+        return self._offset_px(t_kc, mean) <= bound + c.orb_threshold_px
 
     def _start_keyframe(self, gray: _Images, index: int, timestamp: float,
                         reason_out: VOEstimate | None = None, t_kc: np.ndarray | None = None) -> bool:
@@ -759,7 +757,8 @@ class VisualOdometry:
         out, method = _NO_MATCH, Method.NONE
         # at high frame rates the constant-velocity motion says where the robot can be (VOConfig.cv_gate); with wheel
         # odometry only, like the constant-velocity start (without it, cv is the prediction itself)
-        bounded = c.cv_gate and self._gate is not None and cv is not None and cv[1] <= 0.5 * c.lk_window
+        cv_known = self._gate is not None and cv is not None and cv[1] <= 0.5 * c.lk_window
+        bounded = c.cv_gate and cv_known
 
         def implausible(o) -> bool:
             return bounded and o[0] is not None and not self._holds(o[0].delta, cv)
@@ -774,7 +773,7 @@ class VisualOdometry:
                 # a poor prediction (slip, failed frames in between): the same start with a wider capture range
                 out = self._deep_track(ref_gray, ref_px, ref_xn, ref_floor, gray, t_ref_cur, deep, h_ref)
                 method = Method.LK_PYRAMID
-        if out[0] is None and cv is not None and self._gate is not None and cv[1] <= 0.5 * c.lk_window:
+        if out[0] is None and cv_known:
             # the prediction (wheel odometry) missed by more than LK's capture range, e.g. in a wheel slip: the
             # motion vision measured on the previous frame is a start within a few pixels at high frame rates
             # (one LK pass, instead of ORB on both images). Not at low rates (without a fallback cv was the start;
