@@ -31,7 +31,7 @@ from graph.factors import (
 )
 from graph.gnc import gnc_optimize
 from graph.initial import InitialGuessError, chordal_guess, lago_guess, spanning_tree_guess
-from graph.linear import configure
+from graph.linear import configure, run_lm
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GncImpl, GncLoss, GraphParams, InitMethod, RobustMode
 from graph.residuals import LoopResiduals
@@ -148,9 +148,13 @@ def lm_params(params: GraphParams, max_iter: int | None = None,
     return configure(p, graph)
 
 
-def _lm(graph, values, params: GraphParams) -> tuple[gtsam.Values, int]:
-    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(params, graph=graph))
-    return opt.optimize(), int(opt.iterations())
+def solve_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, params: GraphParams,
+             max_iter: int | None = None) -> tuple[gtsam.Values, int]:
+    """LM from `values` at the solver tolerances of `params` (`max_iter`: its iteration cap instead of
+    `solver.lm_max_iterations`); returns (values, iterations)."""
+    s = params.solver
+    return run_lm(graph, values, s.lm_max_iterations if max_iter is None else max_iter, s.lm_relative_tol,
+                  s.lm_absolute_tol)
 
 
 def mestimator(mode: RobustMode, params: GraphParams):
@@ -298,14 +302,14 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
 
     def from_scratch(labels):
         if budget[0] <= 0:
-            return _lm(built.graph(labels), values, params)       # budget spent: warm start only
+            return solve_lm(built.graph(labels), values, params)       # budget spent: warm start only
         budget[0] -= 1
         try:
             guess = values_from_array(data.dim, initial_guess(data, built.subset(labels), method))
         except RuntimeError:
             # the chordal relaxation can be indeterminate for some loop subsets (sphere2500): warm start instead
-            return _lm(built.graph(labels), values, params)
-        return _lm(built.graph(labels), guess, params)
+            return solve_lm(built.graph(labels), values, params)
+        return solve_lm(built.graph(labels), guess, params)
 
     r2 = squared_residuals(built.loops, values)
     pos_a, pos_b = built.a[built.loop_idx], built.b[built.loop_idx]
@@ -334,7 +338,7 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
             if n > 0 and any(np.array_equal(labels, c) for c in candidates[:n]):
                 continue
             if labels is inlier:
-                v, it = _lm(built.graph(labels), values, params)       # polish
+                v, it = solve_lm(built.graph(labels), values, params)       # polish
                 iters += it
                 proposals.append(v)
             v, it = from_scratch(labels)
@@ -349,5 +353,5 @@ def _reinit_rounds(data: PoseGraphData, built: BuiltGraph, params: GraphParams, 
         if not improved and np.array_equal(new, inlier):
             break
         inlier = new
-    values, it = _lm(built.graph(inlier), values, params)
+    values, it = solve_lm(built.graph(inlier), values, params)
     return values, inlier, float(built.graph(inlier).error(values)), rounds, iters + it, scale

@@ -16,7 +16,7 @@ import gtsam
 import numpy as np
 
 from graph.factors import squared_residuals
-from graph.linear import configure
+from graph.linear import run_lm
 from graph.params import GncLoss
 
 _DEBUG = bool(os.environ.get("GRAPH_GNC_DEBUG"))
@@ -79,16 +79,6 @@ def _weighted_graph(base: gtsam.NonlinearFactorGraph, loops: list, sqrt_info: li
     return g
 
 
-def _lm(graph, values, max_iter: int, rel_tol: float, abs_tol: float) -> tuple[gtsam.Values, int]:
-    p = gtsam.LevenbergMarquardtParams()
-    p.setMaxIterations(max_iter)
-    p.setRelativeErrorTol(rel_tol)
-    p.setAbsoluteErrorTol(abs_tol)
-    configure(p, graph)
-    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, p)
-    return opt.optimize(), int(opt.iterations())
-
-
 def gnc_optimize(base: gtsam.NonlinearFactorGraph, loops: list, init: gtsam.Values, thresholds: np.ndarray,
                  loss: GncLoss = GncLoss.TLS, mu_step: float = 1.4, max_iterations: int = 100,
                  inner_iterations: int = 10, final_iterations: int = 100, weights_tol: float = 1e-4,
@@ -111,7 +101,7 @@ def gnc_optimize(base: gtsam.NonlinearFactorGraph, loops: list, init: gtsam.Valu
     initial_cost = float(full.error(init))
     weights = np.ones(len(loops))
     # the least-squares start need not converge: with many false loops it is slow and the answer is wrong anyway
-    values, lm_iters = _lm(full, init, inner_iterations, rel_tol, abs_tol)
+    values, lm_iters = run_lm(full, init, inner_iterations, rel_tol, abs_tol)
     r2 = squared_residuals(loops, values)
     mu = initial_mu(loss, r2, c2)
     if mu > 0 and loss == GncLoss.TLS:
@@ -122,7 +112,7 @@ def gnc_optimize(base: gtsam.NonlinearFactorGraph, loops: list, init: gtsam.Valu
         for outer in range(1, max_iterations + 1):
             new_w = tls_weights(r2, c2, mu) if loss == GncLoss.TLS else gm_weights(r2, c2, mu)
             g = _weighted_graph(base, loops, sqrt_info, new_w, cache)
-            values, it = _lm(g, values, inner_iterations, rel_tol, abs_tol)
+            values, it = run_lm(g, values, inner_iterations, rel_tol, abs_tol)
             lm_iters += it
             r2 = squared_residuals(loops, values)
             cost = float(g.error(values))
@@ -144,7 +134,7 @@ def gnc_optimize(base: gtsam.NonlinearFactorGraph, loops: list, init: gtsam.Valu
     # final polish: for TLS the converged weights are binary; round them and solve to convergence
     final_w = (weights > 0.5).astype(float) if loss == GncLoss.TLS else weights
     g = _weighted_graph(base, loops, sqrt_info, final_w, cache)
-    values, it = _lm(g, values, final_iterations, rel_tol, abs_tol)
+    values, it = run_lm(g, values, final_iterations, rel_tol, abs_tol)
     lm_iters += it
     if loss == GncLoss.TLS:
         # one re-check at the polished solution: a loop the polish brought inside its threshold is re-admitted
@@ -153,6 +143,6 @@ def gnc_optimize(base: gtsam.NonlinearFactorGraph, loops: list, init: gtsam.Valu
         if np.any(readmit):
             final_w = np.where(readmit, 1.0, final_w)
             g = _weighted_graph(base, loops, sqrt_info, final_w, cache)
-            values, it = _lm(g, values, final_iterations, rel_tol, abs_tol)
+            values, it = run_lm(g, values, final_iterations, rel_tol, abs_tol)
             lm_iters += it
     return GncOutcome(values, final_w, outer, lm_iters, initial_cost, float(g.error(values)))

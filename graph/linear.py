@@ -186,3 +186,15 @@ def configure(lm: gtsam.LevenbergMarquardtParams, graph: gtsam.NonlinearFactorGr
     lm.setLinearSolverType("ITERATIVE")
     lm.setIterativeParams(pcg_parameters(scope.params))
     return lm
+
+
+def run_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, max_iterations: int, relative_tol: float,
+           absolute_tol: float) -> tuple[gtsam.Values, int]:
+    """gtsam's LM from `values` to the given tolerances, its linear solver chosen for `graph` (`configure`); returns
+    (values, iterations). The one place every batch LM call of the back end is made."""
+    p = gtsam.LevenbergMarquardtParams()
+    p.setMaxIterations(max_iterations)
+    p.setRelativeErrorTol(relative_tol)
+    p.setAbsoluteErrorTol(absolute_tol)
+    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, configure(p, graph))
+    return opt.optimize(), int(opt.iterations())

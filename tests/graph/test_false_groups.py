@@ -6,7 +6,8 @@ import pytest
 from scipy.stats import chi2
 
 from graph import GraphParams
-from graph.robust import group_threshold, robust_solve
+from graph.groups import group_threshold
+from graph.robust import robust_solve
 from graph.support import revisits
 from tests.graph.synth import ate, noisy_graph, square_laps
 

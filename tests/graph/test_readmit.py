@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import graph.robust as robust
+import graph.tls as tls
 from graph import GraphParams, read_graph
 from graph.batch import build, initial_guess, lm_params
 from graph.factors import graph_of, values_from_array
@@ -28,7 +29,7 @@ def _setup(false_fraction: float):
     base = graph_of(built.priors + built.odometry)
 
     def objective(v):
-        return robust.tls_objective(base, built, v, c2)
+        return tls.tls_objective(base, built, v, c2)
 
     def solve(g, v, n):
         opt = gtsam.LevenbergMarquardtOptimizer(g, v, lm_params(params, n))
@@ -36,7 +37,7 @@ def _setup(false_fraction: float):
     def judge(inlier):
         def run(mask, v0):
             known = built.priors + built.odometry + [f for f, k in zip(built.loops, inlier.tolist()) if k]
-            v, ok, _, n = robust.gnc_tls(known, built.subset(mask), v0, c2[mask], np.arange(int(mask.sum())), params)
+            v, ok, _, n = tls.gnc_tls(known, built.subset(mask), v0, c2[mask], np.arange(int(mask.sum())), params)
             out = np.zeros(len(mask), bool)
             out[np.flatnonzero(mask)[ok]] = True
             return v, out, n
