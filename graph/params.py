@@ -230,10 +230,10 @@ class RobustParams(Config):
                                     doc="at most this many Gauss-Newton steps with the kept loops after the robust "
                                         "solve, from its estimate (LM stops at its cost tolerance, which on a flat "
                                         "objective leaves the map far from the optimum: w10000 0.56 m); 0: off")
-    polish_step_tol: float = setting(1e-3, range="[0, inf)", unit="x map extent",
+    polish_step_tol: float = setting(1e-5, range="[0, inf)", unit="x map extent",
                                      doc="the polish stops after a step that moves no node by more than this x the "
-                                         "largest side of the map's bounding box (Gauss-Newton converges "
-                                         "quadratically there, so about tol^2 x extent is left: w10000 0.2 mm)")
+                                         "largest side of the map's bounding box (at 1e-3 garage stopped 0.22 mm "
+                                         "from the optimum after a 3.6 cm step; at 1e-5, 2e-6 m for one more step)")
     huber_k: float = setting(1.345, range="(0, inf)", doc="kernel width on the whitened residual norm")
     cauchy_k: float = setting(1.0, range="(0, inf)")
     loop_weighting: LoopWeighting = LoopWeighting.THRESHOLD

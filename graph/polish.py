@@ -7,7 +7,8 @@ cost differs from the converged optimum in the 6th digit (144.8683 against 144.8
 the step can. Near the optimum of a small-residual problem Gauss-Newton converges quadratically (w10000: largest
 node step 6.6 m, 0.12 m, 0.0007 m), so the polish takes undamped Gauss-Newton steps from the robust solution (LM
 has already brought it near the optimum) and stops once a step moves no node by more than `polish_step_tol` x the
-map's extent: the error left is then of the order of the next step, about tol^2 x the extent. A step that raises
+map's extent: the error left is then of the order of the next step (on SE(3) not Newton's tol^2 x extent: garage
+was 0.22 mm off after a 3.6 cm step, hence the tight default). A step that raises
 the cost (Gauss-Newton overshooting far from the optimum) or a linear system gtsam cannot solve ends the polish
 and keeps the last estimate; the polish never changes which loops are kept.
 """

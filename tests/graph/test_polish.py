@@ -31,15 +31,13 @@ def _converged(data, start: np.ndarray) -> np.ndarray:
 
 
 def test_robust_solve_reaches_the_optimum_whatever_lm_tolerance():
-    # a loose LM tolerance stops the solve 1.3e-4 m (ATE) from the optimum of a 10 m map; the polish brings it to
-    # about tol^2 x extent (1e-5 m)
+    # a loose LM tolerance stops the solve 1.3e-4 m (ATE) from the optimum of a 10 m map; the polish closes that
     data, truth = _graph()
     ref = _converged(data, truth)
     loose = GraphParams().replace(solver={"lm_relative_tol": 0.1, "init": "odometry"})
     res = robust_solve(data, loose)
     assert res.loop_inlier.all()
     assert ate(ref, res.poses) < 1e-5
-    assert any(n.startswith("polish: 1 Gauss-Newton") or n.startswith("polish: 2 Gauss-Newton") for n in res.notes)
     off = robust_solve(data, loose.replace(robust={"polish_max_steps": 0}))
     assert ate(ref, off.poses) > 10 * ate(ref, res.poses)      # the polish is what closed the gap
     np.testing.assert_array_equal(off.loop_inlier, res.loop_inlier)
