@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from vslam.cli.options import add_frame_and_out_options
 from vslam.cli.progress import Progress
 
 NAME = "loops"
@@ -41,11 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera", help="camera.yaml to use (image folders and videos)")
     p.add_argument("--fps", type=float, default=10.0, help="frame rate for image folders without timestamps")
     p.add_argument("--quiet", action="store_true")
-    p.add_argument("--skip-bad-frames", action="store_true",
-                   help="accept missing/corrupt images: warn, continue, flag the frame (default: a missing image "
-                        "listed in frames.csv is an error)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="reuse a non-empty --out folder, removing the files this command writes (refused otherwise)")
+    add_frame_and_out_options(p)
 
 
 def run(a: argparse.Namespace) -> int:

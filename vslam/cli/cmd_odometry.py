@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 
+from vslam.cli.options import add_frame_and_out_options
 from vslam.cli.progress import Progress
 
 NAME = "odometry"
@@ -24,11 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a VOConfig field, e.g. --set max_features=300 (repeatable)")
     p.add_argument("--quiet", action="store_true")
-    p.add_argument("--skip-bad-frames", action="store_true",
-                   help="accept missing/corrupt images: warn, continue, flag the frame (default: a missing image "
-                        "listed in frames.csv is an error)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="reuse a non-empty --out folder, removing the files this command writes (refused otherwise)")
+    add_frame_and_out_options(p)
 
 
 def run(args: argparse.Namespace) -> int:

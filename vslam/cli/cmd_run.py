@@ -6,6 +6,7 @@ import json
 import math
 from dataclasses import replace
 
+from vslam.cli.options import add_frame_and_out_options
 from vslam.cli.progress import Progress
 
 NAME = "run"
@@ -39,11 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true",
                    help="print the run summary as one JSON object on stdout (metrics.json's content plus the output "
                         "directory); progress still goes to stderr")
-    p.add_argument("--skip-bad-frames", action="store_true",
-                   help="accept missing/corrupt images: warn, continue, flag the frame (default: a missing image "
-                        "listed in frames.csv is an error)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="reuse a non-empty --out folder, removing the files a run writes (refused otherwise)")
+    add_frame_and_out_options(p, writes="the files a run writes")
 
 
 def build_config(a: argparse.Namespace):
