@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 __all__ = ["Height", "HeightTracker"]
 
@@ -46,6 +46,9 @@ class Height:
     metres: float
     log_rel: float = 0.0
     variance: float = 0.0
+    # the frame's estimated roll and pitch (rad) from the tilt refinement that measured its height: the prior mean
+    # of its tilt when it is refined again (as a keyframe) and, decayed, of the next frame's (VOConfig.carry_tilt)
+    tilt: tuple[float, float] = (0.0, 0.0)
 
     def moved(self, ratio_minus_one: float, variance: float) -> Height:
         """The height of a frame measured at (1 + s) times this one, with the variance of s."""
@@ -162,14 +165,14 @@ class HeightTracker:
             d = self.graded_departure(height)
             if d == 0.0:
                 self.nominal_keyframes += 1
-                return Height(self.nominal, height.log_rel, height.variance)
+                return replace(height, metres=self.nominal)
             self.tracked += 1
             self.largest_departure = max(self.largest_departure, abs(d))
-            return Height(self.nominal * math.exp(d), height.log_rel, height.variance)
+            return replace(height, metres=self.nominal * math.exp(d))
         d, sigma = self.departure(height)
         if len(self._frames) > 1 and abs(d) > self.significance * sigma:
             self.tracked += 1
             self.largest_departure = max(self.largest_departure, abs(d))
-            return Height(self.nominal * math.exp(d), height.log_rel, height.variance)
+            return replace(height, metres=self.nominal * math.exp(d))
         self.nominal_keyframes += 1
-        return Height(self.nominal, height.log_rel, height.variance)
+        return replace(height, metres=self.nominal)

@@ -90,5 +90,5 @@ class HeightLinks:
         step = (step_a * var_b + step_b * var_a) / total
         var = var_a * var_b / total
         if not self.shrink_variance:
-            return Height(k2.metres * math.exp(step), k2.log_rel + step, via_k1.variance)
-        return Height(k2.metres * math.exp(step), k2.log_rel + step, k2.variance + var)
+            return Height(k2.metres * math.exp(step), k2.log_rel + step, via_k1.variance, via_k1.tilt)
+        return Height(k2.metres * math.exp(step), k2.log_rel + step, k2.variance + var, via_k1.tilt)

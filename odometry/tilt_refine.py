@@ -48,7 +48,8 @@ def _floor(camera: CameraModel, xn: np.ndarray, heights: np.ndarray, tilts: np.n
 def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarray, delta0: np.ndarray,
                        tilt_sigma: float, height_sigma: float, sigma_floor: float, iterations: int = 2,
                        h_ref: float | None = None, s_prior: float = 0.0,
-                       weights: np.ndarray | None = None) -> TiltFit | None:
+                       weights: np.ndarray | None = None,
+                       tilt_prior: np.ndarray | None = None) -> TiltFit | None:
     """Gauss-Newton refinement of the planar motion ref -> cur with both frames' tilt and the height ratio.
 
     Args:
@@ -63,6 +64,8 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
         s_prior: prior mean of s = h_cur / h_ref - 1 (e.g. pulling the current height towards the nominal one).
         weights: optional (N, 2, 2) information shape of each residual in floor axes (e.g.
             `odometry.tracking.aperture_weights`); None weighs every axis of every point alike.
+        tilt_prior: prior means (4,) of roll_ref, pitch_ref, roll_cur, pitch_cur (rad; None: all 0), e.g. the
+            tilts estimated for the same frames before: the tilt is slow, and a zero mean biases the height ratio.
 
     Returns None with fewer than 8 points.
     """
@@ -76,6 +79,9 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
     q[:3] = delta0
     mu = np.zeros(8)
     mu[7] = s_prior
+    if tilt_prior is not None:
+        mu[3:7] = tilt_prior
+        q[3:7] = tilt_prior
     # prior precisions (a zero sigma pins the parameter with a very stiff prior)
     prec = np.zeros(8)
     prec[3:7] = 1.0 / max(tilt_sigma, 1e-9) ** 2
