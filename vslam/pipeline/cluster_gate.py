@@ -94,7 +94,8 @@ class ClusterGate(MotionGate):
                 r = compose(fa.delta, inverse(fb.delta)) - odo
                 r[2] = wrap_angle(r[2])
                 s = cov + self.fit_covariance(fa) + self.fit_covariance(fb) + np.eye(3) * 1e-12
-                if float(r @ np.linalg.solve(s, r)) > self.params.chi2:
+                # places apart: the positions alone disagree (two fits differing only in heading are no alias)
+                if float(r[:2] @ np.linalg.solve(s[:2, :2], r[:2])) > self.params.chi2:
                     self.alias_distance = min(self.alias_distance, float(np.hypot(r[0], r[1])))
         if self.params.refuse_ambiguous:
             kept = [c for c in candidates if self._decidable(c, query, self.results[(c, query)].fit)]
