@@ -25,7 +25,7 @@ from odometry.fusion import FusionConfig
 from odometry.shared.camera import CameraModel
 from odometry.shared.config import Config, ConfigError, setting
 from odometry.vo import VOConfig
-from vslam.pipeline.motion_gate import MotionGateParams
+from vslam.pipeline.motion_gate import MotionGateParams, vo_drift
 
 
 @dataclass(frozen=True)
@@ -128,9 +128,10 @@ class LoopConfig(Config):
                                              doc="rotation variance in the graph of a loop accepted below the "
                                                  "score threshold (gated acceptance), relative to its fit's")
     vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
-    # a verified loop must agree with the visual odometry between its two keyframes (drift-aware; the loop's floor
-    # fit above is the one judged, and the one given to the graph)
-    gate: MotionGateParams = field(default_factory=MotionGateParams)
+    # a verified loop must agree with the visual odometry between its two keyframes (drift-aware with our VO's
+    # measured drift, motion_gate.vo_drift; the loop's floor fit above is the one judged, and the one given to the
+    # graph)
+    gate: MotionGateParams = field(default_factory=lambda: MotionGateParams(drift=vo_drift()))
 
     def check(self) -> None:
         if self.recognizer == "horizon":

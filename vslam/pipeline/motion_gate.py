@@ -53,6 +53,24 @@ class DriftModel(Config):
                                    doc="position sigma however short the way (keeps the gate finite at rest)")
 
 
+# The pipeline's own VO, as measured: the generic model above scaled by 0.2. On the tuning half (`vslam bench
+# loops` seed 1: both renderers' printed and natural floors, the 0.2 Hz lanes; the tuning regimes of `vslam bench
+# odometry --regimes`: render_floor at 1/22 and 1/38 of 30 fps, our lanes at 40 m and at 100 m, 0.1 Hz, 60 % shift)
+# the smallest factor of the generic model with which every true relative pose between frames more than two camera
+# heights of path apart lies inside the gate (chi-square 3 dof, 99.9 %) was 0.013-0.152 (worst: the 100 m lanes),
+# rounded up to 0.2 (`python -m vslam.pipeline.drift_calibration SEQ...`). The generic model is 7-75x wider than
+# this VO: after a 55 m lap it predicts 2 m (1 sigma) where the VO is off by 0.01-0.13 m, and on a printed floor
+# that admits look-alikes metres away.
+VO_DRIFT_FACTOR = 0.2
+
+
+def vo_drift(factor: float = VO_DRIFT_FACTOR) -> "DriftModel":
+    """The drift model of our VO (the pipeline's gate and graph edges): the generic one scaled by `factor`."""
+    d = DriftModel()
+    return d.replace(trans_fraction=factor * d.trans_fraction, turn_fraction=factor * d.turn_fraction,
+                     heading_rad_per_height=factor * d.heading_rad_per_height)
+
+
 @dataclass(frozen=True)
 class MotionGateParams(Config):
     """The motion gate of verified loop candidates (pipeline: config section `loops.gate`; `vslam loops`)."""
@@ -76,9 +94,11 @@ class MotionGateParams(Config):
                                   doc="an accepted loop anchors the gate once this many accepted loops (itself "
                                       "included) agree with each other through short paths (1: at once); a lone "
                                       "alias then cannot steer the gate")
-    refuse_ambiguous: bool = setting(False, doc="pipeline: once a query has matched two places that cannot both be "
-                                                "right, refuse every candidate whose gate is wide enough to pass a "
-                                                "place that far off as well (undecidable from the motion)")
+    refuse_ambiguous: bool = setting(True, doc="pipeline: once a query has matched two places that cannot both be "
+                                               "right (two candidates with a floor fit, the motion refusing one or "
+                                               "not), refuse every candidate whose gate is wide enough to pass a "
+                                               "place that far off as well (undecidable from the motion; from that "
+                                               "query on)")
     cluster_queries: int = setting(0, range="[0, inf)", unit="query keyframes",
                                    doc="pipeline, on a floor with look-alikes (a verified candidate the motion "
                                        "refused): a loop not anchored by an accepted one needs a candidate of one "
@@ -175,11 +195,18 @@ class MotionGate:
     `results[(candidate, query)]`, so the pipeline gives the graph the same fit the gate judged."""
 
     def __init__(self, fit: Callable[[Verification], LoopPose | None], relative: RelativeMotion,
-                 params: MotionGateParams | None = None):
+                 params: MotionGateParams | None = None, image_sigma_rms: float = 0.0):
         self.fit = fit
         self.relative = relative
         self.params = params or MotionGateParams()
+        self.image_sigma_rms = float(image_sigma_rms)
         self.results: dict[tuple[int, int], GateResult] = {}
+
+    def fit_covariance(self, fit: LoopPose) -> np.ndarray:
+        """The loop's covariance as judged: its fit's, plus each image's registration error (`image_sigma_rms`
+        fit RMS residuals per axis and image, common to all its pairs; the pipeline's graph adds the same)."""
+        s2 = 2.0 * (self.image_sigma_rms * fit.rms) ** 2
+        return np.asarray(fit.covariance, float) + np.diag([s2, s2, 0.0])
 
     @classmethod
     def for_camera(cls, camera: CameraModel, relative: RelativeMotion, params: MotionGateParams | None = None,
@@ -204,7 +231,7 @@ class MotionGate:
         odo, odo_cov = self.relative(candidate, query)
         r = np.asarray(fit.delta, float) - odo
         r[2] = wrap_angle(r[2])
-        s = np.asarray(odo_cov, float) + np.asarray(fit.covariance, float) + np.eye(3) * 1e-12
+        s = np.asarray(odo_cov, float) + self.fit_covariance(fit) + np.eye(3) * 1e-12
         d2 = float(r @ np.linalg.solve(s, r))
         return GateResult(d2 <= self.params.chi2, d2, fit)
 
@@ -222,7 +249,7 @@ class MotionGate:
         odo, cov = self.relative(a, b)
         r = compose(fa.delta, inverse(fb.delta)) - odo
         r[2] = wrap_angle(r[2])
-        s = cov + fa.covariance + fb.covariance + np.eye(3) * 1e-12   # first order; the fits are independent
+        s = cov + self.fit_covariance(fa) + self.fit_covariance(fb) + np.eye(3) * 1e-12   # first order; independent
         return float(r @ np.linalg.solve(s, r)) <= self.params.chi2
 
     def resolve(self, query: int, candidates: list[int]) -> list[int]:

@@ -139,9 +139,9 @@ class Pipeline:
         if not gp.enabled:
             self.gate = None
         elif gp.anchor_loops:
-            self.gate = ClusterGate(self._loop_fit, self.relative_motion, gp)
+            self.gate = ClusterGate(self._loop_fit, self.relative_motion, gp, cfg.loops.image_sigma_rms)
         else:
-            self.gate = MotionGate(self._loop_fit, self.relative_motion, gp)
+            self.gate = MotionGate(self._loop_fit, self.relative_motion, gp, cfg.loops.image_sigma_rms)
         self.loop_detector = build_loop_detector(cfg, camera, self.gate)
         self.graph = backend_graph(cfg.graph, cfg.incremental)
         self.timestamps: list[float] = []
