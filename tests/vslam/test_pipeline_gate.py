@@ -227,4 +227,4 @@ def test_pipeline_on_a_printed_floor_accepts_no_aliased_loop_and_beats_its_vo(tm
         truth = between(gt[lp.match_frame], gt[lp.query_frame])
         assert np.hypot(*(np.asarray(lp.delta[:2]) - truth[:2])) < 0.128     # within half a period of the truth
     ev = evaluate_result(res, seq)
-    assert ev["slam"]["ape_m"]["rmse"] <= ev["vo"]["ape_m"]["rmse"]
+    assert ev["slam"]["ape_m"]["rmse"] <= ev["vo"]["ape_m"]["rmse"] + 1e-9     # equal when every loop is refused

@@ -25,7 +25,7 @@ from odometry.fusion import FusionConfig
 from odometry.shared.camera import CameraModel
 from odometry.shared.config import Config, ConfigError, setting
 from odometry.vo import VOConfig
-from vslam.pipeline.motion_gate import MotionGateParams, vo_drift
+from vslam.pipeline.motion_gate import MotionGateParams
 
 
 @dataclass(frozen=True)
@@ -128,10 +128,12 @@ class LoopConfig(Config):
                                              doc="rotation variance in the graph of a loop accepted below the "
                                                  "score threshold (gated acceptance), relative to its fit's")
     vocab: VocabLoopConfig = field(default_factory=VocabLoopConfig)
-    # a verified loop must agree with the visual odometry between its two keyframes (drift-aware with our VO's
-    # measured drift, motion_gate.vo_drift; the loop's floor fit above is the one judged, and the one given to the
-    # graph)
-    gate: MotionGateParams = field(default_factory=lambda: MotionGateParams(drift=vo_drift()))
+    # a verified loop must agree with the visual odometry between its two keyframes (drift-aware; the loop's floor
+    # fit above is the one judged, and the one given to the graph). The drift model is the generic one, not our VO's
+    # measured drift on simulated floors (motion_gate.vo_drift, 0.2 x): nothing here measures the VO's drift on the
+    # user's imagery, and a gate narrower than the real drift silently refuses true loops, where a wider one only
+    # passes candidates on to the robust back end (docs/loops.md)
+    gate: MotionGateParams = field(default_factory=MotionGateParams)
 
     def check(self) -> None:
         if self.recognizer == "horizon":

@@ -59,13 +59,14 @@ class DriftModel(Config):
 # the smallest factor of the generic model with which every true relative pose between frames more than two camera
 # heights of path apart lies inside the gate (chi-square 3 dof, 99.9 %) was 0.013-0.152 (worst: the 100 m lanes),
 # rounded up to 0.2 (`python -m vslam.pipeline.drift_calibration SEQ...`). The generic model is 7-75x wider than
-# this VO: after a 55 m lap it predicts 2 m (1 sigma) where the VO is off by 0.01-0.13 m, and on a printed floor
-# that admits look-alikes metres away.
+# this VO on those floors. Not the pipeline's default: on imagery unlike the simulators' (real aerial scenes with
+# relief, a different lens) our VO drifts more, and a gate that narrow would refuse true loops (docs/loops.md).
 VO_DRIFT_FACTOR = 0.2
 
 
 def vo_drift(factor: float = VO_DRIFT_FACTOR) -> "DriftModel":
-    """The drift model of our VO (the pipeline's gate and graph edges): the generic one scaled by `factor`."""
+    """Our VO's drift on simulated and rendered floors: the generic model scaled by `factor` (an option, e.g.
+    `--set loops.gate.drift.trans_fraction=0.004 ...`; see docs/loops.md)."""
     d = DriftModel()
     return d.replace(trans_fraction=factor * d.trans_fraction, turn_fraction=factor * d.turn_fraction,
                      heading_rad_per_height=factor * d.heading_rad_per_height)
