@@ -192,7 +192,7 @@ class RobustParams(Config):
                                    "loops a few steps apart fit the global margin (manhattan local 50 %); "
                                    "graph.robust, docs/graph.md")
     own_cycle_test: bool = setting(True, unit="flag",
-                                   doc="after the decision, a kept loop at most 2 x support_window steps apart is "
+                                   doc="after the decision, a kept loop at most support_window steps apart is "
                                        "dropped when the cycle it closes with the odometry between its ends is worse "
                                        "than own_cycle_quantile of the agreeing cycles of kept loops (within [the "
                                        "chi-square quantile, its threshold]): false loops a few steps apart fit the "

@@ -5,8 +5,8 @@ A false loop between nodes a few steps apart (Vertigo's local policy) differs fr
 centimetres: at the solution the short odometry bends towards it, and the global threshold (chi-square x
 `calibration_margin`, which must cover the heavy residual tails of real graphs and the strain a lone loop closing a
 long drift keeps) lets some of them in (sphere2500 local 50 %: 5-6 kept, ATE 0.23-0.25 m against 0.203 m). Over a
-span of at most 2 x `support_window` steps (`graph.thresholds.short_span`) the loop closes a cycle with the
-odometry alone, the same kind of short cycle the cycle test (graph.support) closes with two loops. No drift and no
+span of at most `support_window` steps the loop closes a cycle with the odometry alone, the same kind of short
+cycle the cycle test (graph.support) closes with two loops (at most `support_window` odometry steps at each end). No drift and no
 map enters it, so the agreeing cycles of the kept loops are its reference: a short-span loop whose own cycle error
 exceeds their `own_cycle_quantile` (0.999) is rejected. The reference is read from the graph, not fixed: it is
 2.0 x chi-square(0.99) on sphere2500 (its cycles follow chi-square on the calibrated model), 5.5 x on manhattan
@@ -23,7 +23,6 @@ import numpy as np
 from graph.calibration import VarianceFactors, scale_information
 from graph.model import PoseGraphData
 from graph.support import CycleSupport, _cycle_covariances_3d, _cycle_errors, _inverse, _matrices, chain_poses
-from graph.thresholds import short_span
 
 __all__ = ["agreeing_cycle_r2", "own_cycle_r2", "own_cycle_veto"]
 
@@ -99,7 +98,10 @@ def own_cycle_veto(data: PoseGraphData, cycles: CycleSupport, factors: VarianceF
     out = np.zeros(len(inlier), bool)
     a, b = data.edge_index_pairs()
     idx = data.loop_edges()
-    short = inlier & short_span(np.abs(a[idx] - b[idx]), window)
+    # at most `window` steps: the odometry of a pair cycle is at most `window` steps at each end, so the lever arms
+    # a summed covariance leaves out (planar graphs) are as long in both; at 2 x `window` a lap graph's true loops
+    # (20 steps, 0.01 rad per step) sat at 1.6x the largest pair cycle and were dropped
+    short = inlier & (np.abs(a[idx] - b[idx]) <= max(int(window), 0))
     if not short.any() or len(cycles.r2) == 0:
         return out, None
     r2, sel, propagated = agreeing_cycle_r2(cycles, factors)
