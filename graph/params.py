@@ -191,6 +191,17 @@ class RobustParams(Config):
                                    "and the loops are decided again with the first decision as one more start: false "
                                    "loops a few steps apart fit the global margin (manhattan local 50 %); "
                                    "graph.robust, docs/graph.md")
+    own_cycle_test: bool = setting(True, unit="flag",
+                                   doc="after the decision, a kept loop at most support_window steps apart is "
+                                       "dropped when the cycle it closes with the odometry between its ends is worse "
+                                       "than own_cycle_quantile of the agreeing cycles of kept loops (within [the "
+                                       "chi-square quantile, its threshold]): false loops a few steps apart fit the "
+                                       "global margin (sphere2500 local 50 %: 5-6 kept, 0.23-0.25 m against 0.203 m); "
+                                       "graph.short_span, docs/graph.md")
+    own_cycle_quantile: float = setting(1.0, range="(0, 1]", unit="probability",
+                                        doc="... that quantile: the graph's own tail of short-cycle errors (2.0 x "
+                                            "chi-square(0.99) on sphere2500, 10.5 x on intel, whose worst true "
+                                            "short-span loop sits at 8.5 x; 0.99 put intel's at 4.2 x and lost it)")
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")

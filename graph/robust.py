@@ -14,6 +14,8 @@
 4. polish with the kept loops; the group-level test (each kept revisit cluster one TLS term at the chi-square
    quantile of its n x dof, dropped when the objective is lower without it); then re-admit every rejected loop
    that fits its own threshold at the solution.
+   Then the own-cycle test (graph.short_span): a kept loop between nodes a few steps apart whose cycle with the
+   odometry between its ends is worse than the agreeing cycles of the kept loops is dropped.
 5. once the loop set is decided, Gauss-Newton steps on the kept loops until the map stops moving (graph.polish):
    LM's cost tolerance stops far from the optimum on a flat objective (w10000: 0.56 m).
 
@@ -31,7 +33,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from graph.batch import BuiltGraph, build, initial_guess, resolve_init, solve_lm
-from graph.calibration import scalar_factor, scale_information, split_factors
+from graph.calibration import VarianceFactors, scalar_factor, scale_information, split_factors
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.groups import drop_false_groups, group_threshold
 from graph.kernel_start import dcs_solve, tls_descent
@@ -41,7 +43,8 @@ from graph.params import GraphParams, InitMethod
 from graph.polish import polish
 from graph.readmit import readmit_dropped, readmit_supported
 from graph.result import GraphResult
-from graph.support import clusters, cycle_support
+from graph.short_span import own_cycle_veto
+from graph.support import CycleSupport, clusters, cycle_support
 from graph.thresholds import loop_thresholds, short_span, tail_margin
 from graph.tls import admit_fitting, gnc_tls, tls_objective
 
@@ -64,6 +67,8 @@ class ConsensusProblem:
     starts: list[tuple[str, gtsam.Values]] = field(default_factory=list)
     scale: float = 1.0          # the thresholds' calibration scale (margin x variance factor)
     sigma0: float = 1.0         # the scalar variance factor (1 when uncalibrated or split)
+    cycles: CycleSupport | None = None      # the agreeing cycles (graph.short_span reads their tail)
+    factors: VarianceFactors | None = None  # split 3D variance factors, when the loops are judged calibrated
 
     def __post_init__(self):
         self.base = self.built.priors + self.built.odometry       # known inliers
@@ -113,7 +118,8 @@ def _prepare(data: PoseGraphData, params: GraphParams) -> tuple[ConsensusProblem
     with narrow(lambda: built.pairs(cand)):
         # 2. starts: least squares on the supported loops from LAGO / chordal; the odometry chain
         odometry_values = values_from_array(data.dim, initial_guess(data, stated, InitMethod.ODOMETRY))
-        cs = ConsensusProblem(data, stated, built, pairs, label, cand, odometry_values, method, params, notes)
+        cs = ConsensusProblem(data, stated, built, pairs, label, cand, odometry_values, method, params, notes,
+                              cycles=cycles, factors=factors)
         if supported.any() or method == InitMethod.GIVEN:
             try:
                 # the LAGO / chordal guess from the stated information: it is only a start, and the calibrated one
@@ -310,6 +316,21 @@ def _reach_tail(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, 
     return tight if misfit.any() else None
 
 
+def _own_cycle_test(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray
+                    ) -> tuple[gtsam.Values, np.ndarray, int]:
+    """Drop the kept short-span loops that fail their own-cycle test (graph.short_span) and re-solve on the rest."""
+    p = cs.params.robust
+    drop, note = own_cycle_veto(cs.data, cs.cycles, cs.factors, inlier, c2, c2 / (cs.scale / cs.sigma0),
+                                p.own_cycle_quantile, p.support_window, p.calibration_min_loops)
+    if note is not None:
+        cs.notes.append(note)
+    if not drop.any():
+        return values, inlier, 0
+    inlier = inlier & ~drop
+    values, it = cs.lm(cs.built.graph(inlier), values, cs.params.solver.lm_max_iterations)
+    return values, inlier, it
+
+
 def robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     """The consensus solve (module doc); every LM call in it picks its linear solver by fill-in (graph.linear)."""
     a, b = data.edge_index_pairs()
@@ -331,6 +352,9 @@ def _robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
             # decide again under them, with the first decision as one more start (the TLS objective picks)
             values, inlier, it, t_gnc = decide(cs, tight, extra=values)
             iters += it
+    if params.robust.own_cycle_test and cs.scale != 1.0:
+        values, inlier, it = _own_cycle_test(cs, values, inlier, c2)
+        iters += it
     t_polish = time.perf_counter()
     # 5. the loop set is decided: converge the map on it (graph.polish; LM stopped at its cost tolerance)
     values, it, why = polish(stated.graph(inlier), values, data.dim, params)

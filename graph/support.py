@@ -168,6 +168,39 @@ def cycle_support(data: PoseGraphData, window: int, threshold: float, odometry_c
     return CycleSupport(P[ok], Q[ok], r2[ok], e[ok], s[ok], *parts)
 
 
+def own_cycle_r2(data: PoseGraphData, loops: np.ndarray, propagate: bool = False) -> np.ndarray:
+    """Squared Mahalanobis error of the cycle each loop of `loops` (indices, loop order) closes with the odometry
+    chain between its ends, under `data`'s information: the loop's covariance plus the mean odometry step's per
+    step (as the cycle test sums them), or with `propagate` (3D) propagated to first order through the cycle."""
+    loops = np.asarray(loops, np.int64)
+    if not len(loops):
+        return np.zeros(0)
+    a_all, b_all = data.edge_index_pairs()
+    li = data.loop_edges()[loops]
+    a, b = a_all[li], b_all[li]
+    z = _matrices(data.dim, data.measurements[li])
+    swap = a > b                      # oriented from the earlier node, as in the cycle test
+    z[swap] = _inverse(z[swap])
+    a, b = np.minimum(a, b), np.maximum(a, b)
+    cov = np.linalg.inv(data.information[li])
+    n, d = len(loops), cov.shape[1]
+    # the cycle test's pair cycle with a second "loop" of zero length and no noise at (a, a): the cycle is then
+    # the loop and the odometry from its far end back to a (graph.support._cycle_errors), and the same code
+    # propagates its covariance
+    eye = np.repeat(np.eye(data.dim + 1)[None], n, axis=0)
+    z2 = np.concatenate([z, eye])
+    a2, b2 = np.concatenate([a, a]), np.concatenate([b, a])
+    p, q = np.arange(n), np.arange(n, 2 * n)
+    e = _cycle_errors(data.dim, chain_poses(data), z2, a2, b2, p, q)
+    if propagate and data.dim == 3:
+        s = _cycle_covariances_3d(data, z2, np.concatenate([cov, np.zeros((n, d, d))]),
+                                  np.concatenate([swap, np.zeros(n, bool)]), a2, b2, p, q, None)
+    else:
+        odo = np.linalg.inv(data.information[~data.is_loop]).mean(axis=0)
+        s = cov + (b - a)[:, None, None] * odo[None]
+    return np.einsum("ni,ni->n", e, np.linalg.solve(s, e[..., None])[..., 0])
+
+
 _PERM = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])   # (t, r) <-> (r, t)
 
 
