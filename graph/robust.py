@@ -34,6 +34,7 @@ from scipy.stats import chi2
 
 from graph.batch import BuiltGraph, build, initial_guess, resolve_init, solve_lm
 from graph.calibration import VarianceFactors, scalar_factor, scale_information, split_factors
+from graph.confident import confident_first, confident_holds, confident_start
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.groups import drop_false_groups, group_threshold
 from graph.kernel_start import dcs_solve, tls_descent
@@ -69,6 +70,7 @@ class ConsensusProblem:
     sigma0: float = 1.0         # the scalar variance factor (1 when uncalibrated or split)
     cycles: CycleSupport | None = None      # the agreeing cycles (graph.short_span reads their tail)
     factors: VarianceFactors | None = None  # split 3D variance factors, when the loops are judged calibrated
+    confident: tuple | None = None   # (cluster label or -1, start thunk) of the confidently supported loops (graph.confident)
 
     def __post_init__(self):
         self.base = self.built.priors + self.built.odometry       # known inliers
@@ -144,6 +146,7 @@ def _prepare(data: PoseGraphData, params: GraphParams) -> tuple[ConsensusProblem
         cs.sigma0 = scalar_factor(cycles, dof)
         cs.scale = params.robust.calibration_margin * cs.sigma0
         notes.append(f"variance factor {cs.sigma0:.3g}: thresholds x {cs.scale:.3g}")
+    cs.confident = confident_start(cs, cycles, factors, supported)
     return cs, c2 * cs.scale
 
 
@@ -183,10 +186,18 @@ def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values
 def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None) -> _Best:
     """Steps 2-3: GNC from each start, the lowest TLS objective wins."""
     best = _Best()
-    for name, v0 in cs.starts:
+    # chance-supported random false loops bend every GNC start: first a TLS descent from the map of the confident
+    # loops alone, the only start when every confident cluster keeps loops there (graph.confident)
+    conf_first = confident_first(cs, c2)
+    alone = conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True))
+    if alone:
+        cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
+    for name, v0 in (cs.starts if not alone else []):
         _run_start(cs, c2, name, v0, best)
     robust = cs.params.robust
-    if best.values is None or (robust.odometry_start and not best.untouched):
+    if alone:
+        pass
+    elif best.values is None or (robust.odometry_start and not best.untouched):
         # the odometry start exists for one failure: a group of mutually consistent false loops in the supported
         # set bends the supported start, and the GNC from there keeps the group and rejects the loops it strains
         # (ring, CSAIL). When every supported loop already fits its threshold at the supported start (no GNC step:
@@ -206,6 +217,8 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
             # grouped: 1700 and 1777 loops kept from the two starts); two starts as far apart as the LAGO map of the
             # supported loops and the raw odometry chain ending at the same loops is the sign it did not
             cs.notes.append("DCS-kernel start skipped: both GNC starts kept the same loops")
+        if cs.confident is not None and not conf_first:
+            _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True)
     else:
         cs.notes.append("odometry start skipped: every supported loop fits at the supported start")
     if extra is not None:
