@@ -82,11 +82,11 @@ def confident_start(cs, cycles: CycleSupport, factors, supported: np.ndarray):
 
 
 def confident_first(cs, c2: np.ndarray) -> bool:
-    """Whether the confident start is to be tried before the GNC starts: some candidate misfits at the supported
-    start (else the GNC from there takes no step and nothing is to be gained)."""
-    if cs.confident is None or not cs.starts:
+    """Whether the confident start is to be tried before the GNC starts: some candidate misfits at it (else the
+    supported start fits too, as on clean graphs, and its GNC takes no step)."""
+    if cs.confident is None:
         return False
-    return bool(np.any(cs.built.subset(cs.cand).r2(cs.starts[0][1]) > c2[cs.cand]))
+    return bool(np.any(cs.built.subset(cs.cand).r2(cs.confident[1]()) > c2[cs.cand]))
 
 
 def confident_holds(cs, inlier: np.ndarray) -> bool:

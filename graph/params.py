@@ -237,16 +237,18 @@ class RobustParams(Config):
                                          doc="at most this many re-solves of its TLS descent (keep the loops that "
                                              "fit, re-solve, until the set is stable)")
     confident_start: bool = setting(
-        True, doc="when some supported loop does not fit at the supported start, also start from the map solved on "
+        True, doc="when some supported loop does not fit at the supported start, first start from the map solved on "
                   "the confidently supported loops only (graph.confident: agreeing pairwise under the calibrated "
-                  "threshold, in clusters of `confident_min_cluster`) followed by TLS descent over every candidate; "
-                  "the lowest TLS objective wins. Thousands of chance-supported random false loops bent every GNC "
+                  "noise, in clusters of `confident_min_cluster`) by TLS descent over every candidate; the only "
+                  "start when every confident cluster keeps loops there, else one more beside the GNC starts (the "
+                  "lowest TLS objective wins). Thousands of chance-supported random false loops bent every GNC "
                   "start on w10000 at 50 % (38.9 m from the clean optimum)")
     confident_min_cluster: int = setting(3, range="[2, inf)", unit="loops",
                                          doc="smallest cluster of calibrated-agreeing loops that counts as "
                                              "confident: a true revisit yields a run of consecutive agreeing loops, "
-                                             "while two random false loops agree by chance (w10000 at 50 % random: "
-                                             "400 false loops in pairs or larger, 62 in clusters of 3 or more)")
+                                             "while two random false loops agree by chance (w10000 at 50 % random, "
+                                             "calibrated: 54 false loops in agreeing pairs or larger, 8 in clusters "
+                                             "of 3 or more, all beside true loops they agree with)")
     # the final polish (graph.polish) once the loop set is decided
     polish_max_steps: int = setting(5, range="[0, inf)", unit="Gauss-Newton steps",
                                     doc="at most this many Gauss-Newton steps with the kept loops after the robust "
