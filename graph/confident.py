@@ -18,11 +18,13 @@ chordal, then a few LM iterations) never holds the chance-supported false loops 
 optimum); TLS descent over every candidate from it (graph.kernel_start.tls_descent: keep the loops that fit,
 re-solve) then decides (one re-solve, TLS objective 1992.03, every label right).
 
-When every confident loop fits its threshold at that map, it is the only start: the GNC starts exist for groups of
-mutually consistent false loops that bend the consensus, and a group bending the confident map leaves confident
-loops that do not fit there (the supported start's rule, graph.robust, applied to the confident loops). Otherwise
-it is one more start beside them and the lowest TLS objective wins. The group test, re-admission and the trial
-of the unsupported loops follow either way.
+It runs first when some candidate misfits at that map (else the supported start and its GNC follow as before,
+as on clean graphs). When every confident cluster keeps at least one of its loops after the descent, it is the only start
+(and the supported start, whose LAGO and LM factor every chance-supported long-range false loop, is not made): the
+GNC starts exist for groups of mutually consistent false loops that bend the consensus, and a confident cluster
+rejected whole is such a hypothesis the confident map disagrees with. Otherwise it is one more start beside them
+and the lowest TLS objective wins. The group test, re-admission and the trial of the unsupported loops follow
+either way.
 """
 from __future__ import annotations
 
