@@ -39,9 +39,7 @@ def drift_factor(poses: np.ndarray, truth: np.ndarray, height: float = 1.0, drif
         errors.append(r)
 
     def worst(k: float) -> float:
-        d = drift.replace(trans_fraction=k * drift.trans_fraction, turn_fraction=k * drift.turn_fraction,
-                          heading_rad_per_height=k * drift.heading_rad_per_height)
-        chain = ChainMotion(p, d, height=height)
+        chain = ChainMotion(p, drift.scaled(k), height=height)
         return max(float(r @ np.linalg.solve(chain(a, b)[1], r)) for (a, b), r in zip(pairs, errors))
 
     lo, hi = 1e-4, 1.0

@@ -52,6 +52,11 @@ class DriftModel(Config):
     floor_sigma_m: float = setting(0.01, range="(0, inf)", unit="m",
                                    doc="position sigma however short the way (keeps the gate finite at rest)")
 
+    def scaled(self, factor: float) -> "DriftModel":
+        """The same model with its three drift rates times `factor` (the floor sigma unchanged)."""
+        return self.replace(trans_fraction=factor * self.trans_fraction, turn_fraction=factor * self.turn_fraction,
+                            heading_rad_per_height=factor * self.heading_rad_per_height)
+
 
 # The pipeline's own VO, as measured: the generic model above scaled by 0.2. On the tuning half (`vslam bench
 # loops` seed 1: both renderers' printed and natural floors, the 0.2 Hz lanes; the tuning regimes of `vslam bench
@@ -67,9 +72,7 @@ VO_DRIFT_FACTOR = 0.2
 def vo_drift(factor: float = VO_DRIFT_FACTOR) -> "DriftModel":
     """Our VO's drift on simulated and rendered floors: the generic model scaled by `factor` (an option, e.g.
     `--set loops.gate.drift.trans_fraction=0.004 ...`; see docs/loops.md)."""
-    d = DriftModel()
-    return d.replace(trans_fraction=factor * d.trans_fraction, turn_fraction=factor * d.turn_fraction,
-                     heading_rad_per_height=factor * d.heading_rad_per_height)
+    return DriftModel().scaled(factor)
 
 
 @dataclass(frozen=True)
