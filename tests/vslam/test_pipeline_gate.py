@@ -123,8 +123,12 @@ def two_passes() -> np.ndarray:
 
 def accepted_loops(cam, poses, params) -> dict[int, list[int]]:
     """Query-then-add over the poses with a periodic floor: every pair verifies with the query 5 cm to the side."""
-    gate = MotionGate.for_camera(cam, ChainMotion(poses), params)
-    det = LoopDetector(Everywhere(), Periodic(cam, [0.0, 0.05]), DatabaseParams(exclude_recent=0, shortlist=50),
+    return _query_then_add(cam, poses, MotionGate.for_camera(cam, ChainMotion(poses), params), shortlist=50)
+
+
+def _query_then_add(cam, poses, gate, shortlist: int) -> dict[int, list[int]]:
+    """Accepted candidates per key: each pose queries the periodic floor's detector behind `gate`, then is added."""
+    det = LoopDetector(Everywhere(), Periodic(cam, [0.0, 0.05]), DatabaseParams(exclude_recent=0, shortlist=shortlist),
                        camera=cam, gate=gate)
     found = {}
     for k, p in enumerate(poses):
@@ -186,13 +190,7 @@ def gated_loops(cam, poses, drift: DriftModel) -> dict[int, list[int]]:
     """As `accepted_loops`, through the pipeline's gate (ClusterGate: refuse_ambiguous on by default) over the exact
     odometry with the drift model `drift`."""
     gate = ClusterGate(MotionGate.for_camera(cam, None).fit, ChainMotion(poses, drift), MotionGateParams())
-    det = LoopDetector(Everywhere(), Periodic(cam, [0.0, 0.05]), DatabaseParams(exclude_recent=0, shortlist=500),
-                       camera=cam, gate=gate)
-    found = {}
-    for k, p in enumerate(poses):
-        found[k] = [c.key for c in det.query(None, key=k) if c.accepted]
-        det.add(k, None, None, p)
-    return found
+    return _query_then_add(cam, poses, gate, shortlist=500)
 
 
 @pytest.mark.parametrize("detour_m", [0.0, 20.0])
