@@ -53,16 +53,16 @@ def confident_loops(cycles: CycleSupport, num_loops: int, dof: int, scale: float
     return np.where(size[label] >= max(params.robust.confident_min_cluster, 2), label, -1)
 
 
-def confident_start(cs, cycles: CycleSupport, factors, supported: np.ndarray):
-    """(mask of the confident loops, thunk giving the start from them: LAGO / chordal on them, then warm LM, computed
-    on first use), or None when off or when no loop is confident. `cs`: the consensus problem (graph.robust). The
-    pairs are tested on the stated covariances at the variance factor of the agreeing cycles (with the split 3D
-    calibration, its single factor)."""
+def confident_start(cs, supported: np.ndarray):
+    """(cluster label per loop, -1 for a loop that is not confident; thunk giving the start from the confident
+    loops: LAGO / chordal on them, then warm LM, computed on first use), or None when off or when no loop is
+    confident. `cs`: the consensus problem (graph.robust), whose agreeing cycles are tested on the stated covariances
+    at their variance factor (with the split 3D calibration, its single factor)."""
     params = cs.params
     if not params.robust.confident_start:
         return None
-    scale = cs.sigma0 if factors is None else factors.scalar
-    label = confident_loops(cycles, cs.loops, TANGENT_DIM[cs.data.dim], scale, params)
+    scale = cs.sigma0 if cs.factors is None else cs.factors.scalar
+    label = confident_loops(cs.cycles, cs.loops, TANGENT_DIM[cs.data.dim], scale, params)
     label[~supported] = -1
     mask = label >= 0
     if not mask.any():

@@ -158,7 +158,7 @@ def _prepare(data: PoseGraphData, params: GraphParams) -> tuple[ConsensusProblem
         cs.sigma0 = scalar_factor(cycles, dof)
         cs.scale = params.robust.calibration_margin * cs.sigma0
         notes.append(f"variance factor {cs.sigma0:.3g}: thresholds x {cs.scale:.3g}")
-    cs.confident = confident_start(cs, cycles, factors, supported)
+    cs.confident = confident_start(cs, supported)
     # with a confident start the supported one is made only when needed: on w10000 at 50 % random its LAGO and LM
     # factor thousands of chance-supported long-range false loops (127 s of 142 s) and the confident start stands
     # alone (graph.confident)
@@ -208,45 +208,49 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
     # chance-supported random false loops bend every GNC start: first a TLS descent from the map of the confident
     # loops alone, the only start when every confident cluster keeps loops there (graph.confident)
     conf_first = confident_first(cs, c2)
-    alone = conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True))
-    if alone:
+    if conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best,
+                                                     descent=True)):
         cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
     else:
         cs.ready()
-    for name, v0 in (cs.starts if not alone else []):
-        _run_start(cs, c2, name, v0, best)
-    robust = cs.params.robust
-    if alone:
-        pass
-    elif best.values is None or (robust.odometry_start and not best.untouched):
-        # the odometry start exists for one failure: a group of mutually consistent false loops in the supported
-        # set bends the supported start, and the GNC from there keeps the group and rejects the loops it strains
-        # (ring, CSAIL). When every supported loop already fits its threshold at the supported start (no GNC step:
-        # the local consensus and the global solution agree), no loop is truncated and that failure cannot have
-        # happened; the second start (the slowest solve: drift makes its GNC start near-convex) is skipped.
-        # (A weaker sign, a cluster of agreeing loops split by the solution, misses ring random-grouped.)
-        first = best.inlier
-        agree = first is not None and np.array_equal(first, _run_start(cs, c2, "odometry", cs.odometry_values, best))
-        if robust.kernel_start and (robust.kernel_start_always or not agree):
-            # groups of consistent false loops spread over the map bend GNC's convex surrogate itself, from either
-            # start (manhattan random-grouped): a DCS solve from the odometry chain never forms it
-            v0 = dcs_solve(cs.base, cs.built.subset(cs.cand).loops, cs.odometry_values,
-                           robust.kernel_phi * cs.sigma0, cs.params)
-            _run_start(cs, c2, "DCS kernel", v0, best, descent=True)
-        elif robust.kernel_start:
-            # a surrogate bent by false groups traps each GNC in a minimum of its own start (manhattan random-
-            # grouped: 1700 and 1777 loops kept from the two starts); two starts as far apart as the LAGO map of the
-            # supported loops and the raw odometry chain ending at the same loops is the sign it did not
-            cs.notes.append("DCS-kernel start skipped: both GNC starts kept the same loops")
-        if cs.confident is not None and not conf_first:
-            _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True)
-    else:
-        cs.notes.append("odometry start skipped: every supported loop fits at the supported start")
+        _gnc_starts(cs, c2, best, confident_after=not conf_first)
     if extra is not None:
         # the earlier decision, re-judged under these thresholds: the tightened test must not swap a start that
         # won for one that lost (manhattan random-grouped 30 %, seed 3: 0.8 -> 24 m without it)
         _run_start(cs, c2, "previous decision", extra, best, descent=True)
     return best
+
+
+def _gnc_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best, confident_after: bool) -> None:
+    """GNC from the supported start, then (when some supported loop misfits there) from the odometry chain, the
+    DCS kernel when those two disagree, and the confident start when it did not run first (`confident_after`)."""
+    for name, v0 in cs.starts:
+        _run_start(cs, c2, name, v0, best)
+    robust = cs.params.robust
+    if not (best.values is None or (robust.odometry_start and not best.untouched)):
+        cs.notes.append("odometry start skipped: every supported loop fits at the supported start")
+        return
+    # the odometry start exists for one failure: a group of mutually consistent false loops in the supported
+    # set bends the supported start, and the GNC from there keeps the group and rejects the loops it strains
+    # (ring, CSAIL). When every supported loop already fits its threshold at the supported start (no GNC step:
+    # the local consensus and the global solution agree), no loop is truncated and that failure cannot have
+    # happened; the second start (the slowest solve: drift makes its GNC start near-convex) is skipped.
+    # (A weaker sign, a cluster of agreeing loops split by the solution, misses ring random-grouped.)
+    first = best.inlier
+    agree = first is not None and np.array_equal(first, _run_start(cs, c2, "odometry", cs.odometry_values, best))
+    if robust.kernel_start and (robust.kernel_start_always or not agree):
+        # groups of consistent false loops spread over the map bend GNC's convex surrogate itself, from either
+        # start (manhattan random-grouped): a DCS solve from the odometry chain never forms it
+        v0 = dcs_solve(cs.base, cs.built.subset(cs.cand).loops, cs.odometry_values,
+                       robust.kernel_phi * cs.sigma0, cs.params)
+        _run_start(cs, c2, "DCS kernel", v0, best, descent=True)
+    elif robust.kernel_start:
+        # a surrogate bent by false groups traps each GNC in a minimum of its own start (manhattan random-
+        # grouped: 1700 and 1777 loops kept from the two starts); two starts as far apart as the LAGO map of the
+        # supported loops and the raw odometry chain ending at the same loops is the sign it did not
+        cs.notes.append("DCS-kernel start skipped: both GNC starts kept the same loops")
+    if cs.confident is not None and confident_after:
+        _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True)
 
 
 def _try_unsupported(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray
