@@ -221,6 +221,26 @@ class VOConfig(Config):
     reacquire_min_fraction: float = setting(0.5, range="[0, 1]", doc="the same when re-acquiring")
     prediction_gate: float = setting(6.0, range="(0, inf)", unit="sigma",
                                      doc="a descriptor motion this far from the given fallback motion is rejected")
+    # a periodic floor (one printed photograph tiled) shows the same view at every lattice step p of its period:
+    # vision cannot tell the motions t + k p apart, and the ORB consensus of the largest overlap (the smallest image
+    # motion) wins although the true place is another copy. With wheel odometry at a low frame rate the prediction
+    # gate (6 sigma of the inflated wheel covariance: 480 mm for 40 mm stated) holds several copies of a 256 mm
+    # period. The keyframe's ORB features matched against themselves measure its lattice; the copies of a
+    # descriptor or phase-correlation motion inside the gate that LK confirms as well are weighed by the
+    # prediction alone (their image evidence is the same), and the frame is refused when none is clearly likeliest
+    alias_guard: bool = setting(True, doc="with wheel odometry, a descriptor or phase-correlation motion on a "
+                                          "self-similar keyframe is chosen among its confirmed copies one lattice "
+                                          "step apart by the prediction, or refused")
+    # a wrong copy costs a whole period (256 mm on the printed floor), a refused frame only the wheel odometry's own
+    # error for that frame (20-40 mm): a copy is kept when the chance that it is the wrong one is below ~10 %
+    alias_confidence: float = setting(0.9, range="[0, 1]", unit="probability",
+                                      doc="posterior of the chosen copy among the confirmed copies (Gaussian "
+                                          "likelihood under the gate covariance); below it the frame is refused")
+    # an exact copy is tracked by LK as well as the place itself (share ~1 each on the printed floor); a place that
+    # only resembles it (a real tiled floor) tracks far fewer of the corners it puts in view
+    alias_support: float = setting(0.5, range="[0, 1]", unit="ratio of LK shares",
+                                   doc="a copy counts when LK tracks at least this share of the first motion's "
+                                       "tracked share of the corners in view")
     reacquire_keyframes: int = setting(6, range="[0, inf)",
                                        doc="recent keyframes a frame is matched against after tracking was lost")
     reanchor_frames: int = setting(100, range="[0, inf)",
@@ -403,6 +423,7 @@ class _Keyframe:
     floor: np.ndarray    # (N, 2) their floor points in the keyframe's base frame
     orb: Features | None = None  # ORB features, computed when the descriptor path first needs them
     orb_dense: Features | None = None  # the dense retry's ORB features, likewise
+    lattice: np.ndarray | None = None  # (K, 2) periods of its view on the floor (m; K = 0-2), when measured
     height: Height | None = None  # its camera height (None: the nominal camera_height)
     # the keyframe this one was renewed from and this one's pose in its frame (for the redundant height link;
     # cleared once the next keyframe has used it, so keyframes do not hold the whole chain)
@@ -836,6 +857,12 @@ class VisualOdometry:
                 if implausible(out) or (out[0] is not None and c.shift_gate and gate is not None
                                         and t_ref_cur is not None and not self._in_gate(out[0], t_ref_cur, gate[1])):
                     out = _NO_MATCH
+                if out[0] is not None and c.alias_guard and gate is not None and t_ref_cur is not None:
+                    # ... and inside the gate it may still be a copy while the place is another (VOConfig.alias_guard)
+                    ref = keyframe if keyframe is not None else _Keyframe(
+                        index=-1, timestamp=0.0, gray=ref_gray, pts=ref_px, xn=ref_xn, floor=ref_floor, height=h_ref)
+                    share = out[0].n_inliers / max(self._visible(ref, out[0].delta), 1)
+                    out = self._dealias(ref, gray, out, share, t_ref_cur, gate, c.orb_confirm_fraction)
         if out[0] is None and t_ref_cur is None:
             out = self._deep_track(ref_gray, ref_px, ref_xn, ref_floor, gray, np.zeros(3), deep, h_ref)
             method = Method.LK_PYRAMID
@@ -909,7 +936,7 @@ class VisualOdometry:
         # consensus stands on its own.
         left = np.arange(len(ia))
         need = c.reacquire_min_fraction if confirm else c.orb_confirm_fraction
-        best, best_share, strong = None, 0.0, None
+        best, best_share, strong, outside = None, 0.0, None, None
         for _ in range(c.orb_hypotheses):
             if len(left) < c.orb_min_inliers:
                 break
@@ -925,10 +952,119 @@ class VisualOdometry:
                 if strong is None and strong_alone and not confirm and fit.n_inliers >= c.orb_strong_inliers \
                         and fit.n_inliers >= c.orb_strong_ratio * len(ia):
                     strong = (fit, ref_px[left], cur_px[left], fit.inliers)
+            elif outside is None:
+                outside = (fit, ref_px[left], cur_px[left], fit.inliers)
             left = left[~fit.inliers]
         if best is not None:
-            return best, Method.ORB_LK
-        return (strong, Method.ORB) if strong is not None else none
+            best = self._dealias(kf, gray, best, best_share, t_pred, gate, need)
+            return (best, Method.ORB_LK) if best[0] is not None else none
+        if strong is not None:
+            strong = self._dealias(kf, gray, strong, need, t_pred, gate, need)
+            return (strong, Method.ORB) if strong[0] is not None else none
+        if outside is not None:
+            # a copy of the view outside the gate: on a periodic floor the place itself may be a lattice step away
+            found = self._dealias(kf, gray, outside, need, t_pred, gate, need, inside=False)
+            return (found, Method.ORB_LK) if found[0] is not None else none
+        return none
+
+    def _lattice(self, kf: _Keyframe) -> np.ndarray:
+        """The periods of a keyframe's view: (K, 2) floor translations (keyframe frame, m) under which it repeats,
+        K = 0 (not self-similar), 1 or 2 (a plane lattice). Measured once per keyframe from its ORB features
+        matched against themselves: the displacements to each keypoint's nearest look-alikes (self excluded)
+        scatter on an ordinary floor and pile up at the lattice steps on a periodic one."""
+        if kf.lattice is not None:
+            return kf.lattice
+        c = self.config
+        if kf.orb is None:
+            kf.orb = self._orb(kf.gray)
+        feats = kf.orb
+        kf.lattice = np.zeros((0, 2))
+        if len(feats) < c.orb_min_inliers:
+            return kf.lattice
+        knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(feats.desc, feats.desc, k=min(4, len(feats)))
+        pairs = np.array([(m.queryIdx, m.trainIdx) for ms in knn for m in ms if m.trainIdx != m.queryIdx])
+        if len(pairs) == 0:
+            return kf.lattice
+        fl = self._floor(self.camera.normalize(feats.pts), kf.height)
+        d = fl[pairs[:, 1]] - fl[pairs[:, 0]]
+        tol = c.orb_threshold_px * self._m_per_px
+        # a look-alike within an LK window is the same corner seen at two pyramid octaves or along an edge
+        d = d[np.hypot(d[:, 0], d[:, 1]) > c.lk_window * self._m_per_px]
+        found: list[np.ndarray] = []
+        while len(d) >= c.orb_min_inliers and len(found) < 2:
+            keys, counts = np.unique(np.round(d / tol).astype(np.int64), axis=0, return_counts=True)
+            centre = keys[np.argmax(counts)] * tol
+            near = np.hypot(*(d - centre).T) <= 1.5 * tol
+            if near.sum() < c.orb_min_inliers:
+                break
+            p = d[near].mean(axis=0)
+            n = float(np.hypot(*p))
+            found.append(p)
+            # everything on its line (-p, 2p: the same generator) is done with; the next pile is a second generator
+            d = d[np.abs(d[:, 0] * p[1] - d[:, 1] * p[0]) / n > 1.5 * tol]
+        kf.lattice = np.array(found).reshape(-1, 2)
+        return kf.lattice
+
+    def _dealias(self, kf: _Keyframe, gray: _Images, out, share: float, t_pred: np.ndarray | None,
+                 gate: tuple[np.ndarray, np.ndarray] | None, need: float, inside: bool = True):
+        """`out`, a descriptor or phase-correlation motion from keyframe `kf` (inside the gate, or with `inside`
+        False outside it), or the copy of it one or more lattice steps away that the prediction makes likeliest,
+        or no motion (_NO_MATCH) when no copy is likely enough (VOConfig.alias_guard). A copy inside the gate is
+        confirmed when LK started there stays there and tracks a comparable share of the corners it puts in
+        view, ruled out when LK does not, and stays possible, unconfirmable, when too few corners are in view."""
+        c = self.config
+        if not c.alias_guard or gate is None or t_pred is None or out[0] is None:
+            return out if inside else _NO_MATCH
+        lattice = self._lattice(kf)
+        if len(lattice) == 0:
+            return out if inside else _NO_MATCH
+        a = out[0].delta
+        cov = gate[1] + out[0].covariance + np.diag([(c.orb_threshold_px * self._m_per_px) ** 2] * 2 + [1e-4])
+        info = np.linalg.inv(cov)
+
+        def d2(t: np.ndarray) -> float:
+            e = t - t_pred
+            e[2] = wrap_angle(e[2])
+            return float(e @ info @ e)
+
+        # the lattice steps that bring `a` nearest the prediction, and their neighbours
+        k0 = np.linalg.lstsq(lattice.T, (t_pred - a)[:2], rcond=None)[0]
+        ranges = [range(int(math.floor(k)) - 2, int(math.floor(k)) + 4) for k in k0]
+        grid = np.array(np.meshgrid(*ranges, indexing="ij")).reshape(len(lattice), -1).T
+        pool = [(out, d2(a))] if inside else []
+        copies = []
+        for k in grid:
+            if k.any():
+                t = a.copy()
+                t[:2] += k @ lattice
+                copies.append((d2(t), t))
+        copies = [(e2, t) for e2, t in copies if e2 <= c.prediction_gate ** 2]
+        # a copy whose likelihood is below 1 % of what the decision leaves to the others cannot change it: not tested
+        e2_min = min([e2 for e2, _ in copies] + [p[1] for p in pool], default=0.0)
+        negligible = e2_min - 2 * math.log(0.01 * max(1 - c.alias_confidence, 1e-12))
+        for e2, t in sorted(copies, key=lambda x: x[0]):
+            if e2 > negligible:
+                break
+            if self._visible(kf, t) < c.min_inliers:
+                # vision cannot tell whether the place is there (it hardly overlaps the keyframe): possible
+                pool.append((_NO_MATCH, e2))
+                continue
+            copy = self._track(kf.gray, kf.pts, kf.xn, kf.floor, gray, t, h_ref=kf.height)
+            if copy[0] is None or self._offset_px(copy[0].delta, t) > 0.5 * c.lk_window \
+                    or self._same_place(copy[0].delta, a):
+                continue
+            copy_share = copy[0].n_inliers / max(self._visible(kf, copy[0].delta), 1)
+            if copy_share >= max(need, c.alias_support * share):
+                pool.append((copy, d2(copy[0].delta)))
+        if not pool:
+            return _NO_MATCH
+        if len(pool) == 1:
+            return pool[0][0]
+        e2 = np.array([p[1] for p in pool])
+        post = np.exp(-0.5 * (e2 - e2.min()))
+        post /= post.sum()
+        i = int(np.argmax(post))
+        return pool[i][0] if post[i] >= c.alias_confidence else _NO_MATCH
 
     def _same_place(self, a: np.ndarray, b: np.ndarray) -> bool:
         """Two motions within the ORB inlier distance of each other, at the image centre and at its edge."""
