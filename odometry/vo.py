@@ -235,7 +235,8 @@ class VOConfig(Config):
     # error for that frame (20-40 mm): a copy is kept when the chance that it is the wrong one is below ~10 %
     alias_confidence: float = setting(0.9, range="[0, 1]", unit="probability",
                                       doc="posterior of the chosen copy among the confirmed copies (Gaussian "
-                                          "likelihood under the gate covariance); below it the frame is refused")
+                                          "likelihood under the prediction's covariance); below it the frame is "
+                                          "refused")
     # an exact copy is tracked by LK as well as the place itself (share ~1 each on the printed floor); a place that
     # only resembles it (a real tiled floor) tracks far fewer of the corners it puts in view
     alias_support: float = setting(0.5, range="[0, 1]", unit="ratio of LK shares",
@@ -1019,13 +1020,18 @@ class VisualOdometry:
         if len(lattice) == 0:
             return out if inside else _NO_MATCH
         a = out[0].delta
-        cov = gate[1] + out[0].covariance + np.diag([(c.orb_threshold_px * self._m_per_px) ** 2] * 2 + [1e-4])
+        # the likelihood of a copy is the prediction's own (the gate's covariance without its fallback_inflation,
+        # which is a margin for the gate, not the wheel odometry's word); the gate still bounds the copies tried
+        cov = gate[1] / max(c.fallback_inflation, 1.0) + out[0].covariance \
+            + np.diag([(c.orb_threshold_px * self._m_per_px) ** 2] * 2 + [1e-4])
         info = np.linalg.inv(cov)
+        gate_info = np.linalg.inv(gate[1] + out[0].covariance
+                                  + np.diag([(c.orb_threshold_px * self._m_per_px) ** 2] * 2 + [1e-4]))
 
-        def d2(t: np.ndarray) -> float:
+        def d2(t: np.ndarray, m: np.ndarray = info) -> float:
             e = t - t_pred
             e[2] = wrap_angle(e[2])
-            return float(e @ info @ e)
+            return float(e @ m @ e)
 
         # the lattice steps that bring `a` nearest the prediction, and their neighbours
         k0 = np.linalg.lstsq(lattice.T, (t_pred - a)[:2], rcond=None)[0]
@@ -1037,8 +1043,8 @@ class VisualOdometry:
             if k.any():
                 t = a.copy()
                 t[:2] += k @ lattice
-                copies.append((d2(t), t))
-        copies = [(e2, t) for e2, t in copies if e2 <= c.prediction_gate ** 2]
+                if d2(t, gate_info) <= c.prediction_gate ** 2:
+                    copies.append((d2(t), t))
         # a copy whose likelihood is below 1 % of what the decision leaves to the others cannot change it: not tested
         e2_min = min([e2 for e2, _ in copies] + [p[1] for p in pool], default=0.0)
         negligible = e2_min - 2 * math.log(0.01 * max(1 - c.alias_confidence, 1e-12))
