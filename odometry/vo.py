@@ -32,6 +32,7 @@ from odometry.descriptor_path import Features, match_features, orb_features
 from odometry.errors import OdometryError
 from odometry.height import Height, HeightTracker
 from odometry.height_link import HeightLinks
+from odometry.lattice import view_lattice
 from odometry.rigid import RigidFit, kabsch_2d, ransac_rigid_2d
 from odometry.shared.camera import CameraModel
 from odometry.shared.config import Config, ConfigError, setting
@@ -969,41 +970,18 @@ class VisualOdometry:
         return none
 
     def _lattice(self, kf: _Keyframe) -> np.ndarray:
-        """The periods of a keyframe's view: (K, 2) floor translations (keyframe frame, m) under which it repeats,
-        K = 0 (not self-similar), 1 or 2 (a plane lattice). Measured once per keyframe from its ORB features
-        matched against themselves: the displacements to each keypoint's nearest look-alikes (self excluded)
-        scatter on an ordinary floor and pile up at the lattice steps on a periodic one."""
-        if kf.lattice is not None:
-            return kf.lattice
-        c = self.config
-        if kf.orb is None:
-            kf.orb = self._orb(kf.gray)
-        feats = kf.orb
-        kf.lattice = np.zeros((0, 2))
-        if len(feats) < c.orb_min_inliers:
-            return kf.lattice
-        knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(feats.desc, feats.desc, k=min(4, len(feats)))
-        pairs = np.array([(m.queryIdx, m.trainIdx) for ms in knn for m in ms if m.trainIdx != m.queryIdx])
-        if len(pairs) == 0:
-            return kf.lattice
-        fl = self._floor(self.camera.normalize(feats.pts), kf.height)
-        d = fl[pairs[:, 1]] - fl[pairs[:, 0]]
-        tol = c.orb_threshold_px * self._m_per_px
-        # a look-alike within an LK window is the same corner seen at two pyramid octaves or along an edge
-        d = d[np.hypot(d[:, 0], d[:, 1]) > c.lk_window * self._m_per_px]
-        found: list[np.ndarray] = []
-        while len(d) >= c.orb_min_inliers and len(found) < 2:
-            keys, counts = np.unique(np.round(d / tol).astype(np.int64), axis=0, return_counts=True)
-            centre = keys[np.argmax(counts)] * tol
-            near = np.hypot(*(d - centre).T) <= 1.5 * tol
-            if near.sum() < c.orb_min_inliers:
-                break
-            p = d[near].mean(axis=0)
-            n = float(np.hypot(*p))
-            found.append(p)
-            # everything on its line (-p, 2p: the same generator) is done with; the next pile is a second generator
-            d = d[np.abs(d[:, 0] * p[1] - d[:, 1] * p[0]) / n > 1.5 * tol]
-        kf.lattice = np.array(found).reshape(-1, 2)
+        """The periods of a keyframe's view (odometry.lattice.view_lattice), measured once per keyframe."""
+        if kf.lattice is None:
+            c = self.config
+            if kf.orb is None:
+                kf.orb = self._orb(kf.gray)
+            feats = kf.orb
+            if len(feats) < c.orb_min_inliers:
+                kf.lattice = np.zeros((0, 2))
+                return kf.lattice
+            kf.lattice = view_lattice(self._floor(self.camera.normalize(feats.pts), kf.height), feats.desc,
+                                      tol=c.orb_threshold_px * self._m_per_px, min_step=c.lk_window * self._m_per_px,
+                                      min_count=c.orb_min_inliers)
         return kf.lattice
 
     def _dealias(self, kf: _Keyframe, gray: _Images, out, share: float, t_pred: np.ndarray | None,
