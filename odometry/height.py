@@ -25,6 +25,12 @@ observable from images, and the chain's errors add up like a random walk. So:
   nominal height ((1 - f)^2 start_sigma^2) instead of the spread seen so far, and S^2 becomes the heights' second
   moment about the anchor (the spread of a short stretch about its own mean hides how far it is from the nominal
   level);
+- the chain's variance (`Height.variance`) is the sum of the links' variances, each the refinement's marginal
+  one, which counts the tilts it leaves to its priors as independent between the two frames of a link. With
+  `Height.moved_coupled` (VOConfig.height_tilt_coupling) the tilt part is a wobble shared over time instead
+  (consecutive links share the keyframe between them; the frames of a link are ~0.1-0.6 s apart against a
+  correlation time of seconds), its standard deviation estimated from the tilts the refinement measures
+  (`WobbleEstimate`: ~0 for a camera that does not tilt);
 - or, without `graded`, a hard switch: d is used only when |d| > `significance` * sigma_d, else the keyframe is
   put at the nominal height. It throws away real departures below the threshold (up to ~0.6 % on a planks floor
   whose links are poorly measured in turns) and uses the noisy ones above it in full.
@@ -33,9 +39,10 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-__all__ = ["Height", "HeightTracker"]
+__all__ = ["Height", "HeightTracker", "WobbleEstimate"]
 
 
 @dataclass(frozen=True)
@@ -49,12 +56,44 @@ class Height:
     # the frame's estimated roll and pitch (rad) from the tilt refinement that measured its height: the prior mean
     # of its tilt when it is refined again (as a keyframe) and, decayed, of the next frame's (VOConfig.carry_tilt)
     tilt: tuple[float, float] = (0.0, 0.0)
+    # with a tilt wobble correlated over time (`moved_coupled`): the tilt gains of every link chained so far,
+    # per axis (roll, pitch), each decayed by exp(-age / wobble_time) to the time `t` of this frame
+    tilt_sum: tuple[float, float] = (0.0, 0.0)
+    t: float | None = None
 
     def moved(self, ratio_minus_one: float, variance: float) -> Height:
         """The height of a frame measured at (1 + s) times this one, with the variance of s."""
         s = max(ratio_minus_one, -0.5)   # a refinement gone astray must not flip the sign of the scale
         return Height(self.metres * (1.0 + s), self.log_rel + math.log1p(s), self.variance + max(variance, 0.0))
 
+    def moved_coupled(self, ratio_minus_one: float, data_variance: float, gain: Sequence[float], t: float,
+                      wobble_sigma: float, wobble_time: float) -> Height:
+        """`moved`, with the link's tilt part counted for a wobble that is shared between frames.
+
+        The link's error from the tilts the data leave to the priors is -gain . tilt (gain: d s / d tilt of
+        roll_ref, pitch_ref, roll_cur, pitch_cur, `TiltFit.height_tilt_gain`). The refinement's variance counts
+        that part as if the two frames' tilts were independent. A real wobble is slow (correlation
+        exp(-dt / wobble_time) per axis): the two frames of a link share most of it, and so do consecutive links
+        (a keyframe is the current frame of one link and the reference of the next). So the link's variance is its
+        image-noise part (`data_variance`, `TiltFit.height_variance_data`) plus the covariance of its tilt part with
+        itself and everything chained before: wobble_sigma^2 times the sum over pairs of gains times their
+        correlation, accumulated through the decayed sum `tilt_sum` (exact for that correlation).
+        """
+        g = [float(x) for x in gain]
+        rho = math.exp(-(t - self.t) / wobble_time) if self.t is not None and wobble_time > 0 else 0.0
+        acc = [0.0, 0.0]
+        coupled = 0.0
+        for a in range(2):   # roll, pitch: independent axes
+            g_ref, g_cur = g[a], g[2 + a]
+            before = self.tilt_sum[a] if self.t is not None else 0.0   # at the keyframe's time: the reference's
+            coupled += g_ref * g_ref + 2.0 * g_ref * before
+            coupled += g_cur * g_cur + 2.0 * rho * g_cur * (before + g_ref)
+            acc[a] = rho * (before + g_ref) + g_cur
+        link = max(data_variance, 0.0) + wobble_sigma * wobble_sigma * coupled
+        h = self.moved(ratio_minus_one, 0.0)
+        # the chain's accumulated variance cannot fall (a negative cross term only takes back what a correlated
+        # earlier link added)
+        return replace(h, variance=max(self.variance + link, self.variance), tilt_sum=(acc[0], acc[1]), t=float(t))
 
 class HeightTracker:
     """The time window of chained relative heights and the rule (graded shrinkage or significance switch) that
@@ -176,3 +215,38 @@ class HeightTracker:
             return replace(height, metres=self.nominal * math.exp(d))
         self.nominal_keyframes += 1
         return replace(height, metres=self.nominal)
+
+
+class WobbleEstimate:
+    """The standard deviation of the camera's real tilt wobble, from the tilts the refinement estimates.
+
+    Each estimate is the posterior mean under the zero-mean prior of standard deviation `prior_sigma`: with a
+    posterior variance P its gain is K = 1 - P / prior^2 and its noise n^2 = P / K, so for a wobble of variance
+    w^2, E[estimate^2] = K^2 (w^2 + n^2) = K^2 w^2 + K P. Pooled over every estimate, w^2 = (sum estimate^2 -
+    sum K P) / sum K^2, starting from `prior_weight` estimates at the prior's own variance (a few early frames do
+    not decide it). A camera that does not tilt gets ~0; a wobbling robot about its wobble.
+    """
+
+    def __init__(self, prior_sigma: float, prior_weight: float) -> None:
+        self.prior_sigma = float(prior_sigma)
+        self.prior_weight = float(prior_weight)
+        self._sum2 = 0.0
+        self._sum_kp = 0.0
+        self._sum_k2 = 0.0
+
+    def add(self, estimates: Sequence[float], variances: Sequence[float]) -> None:
+        """Add tilt estimates (rad) with their posterior variances (rad^2)."""
+        s2 = self.prior_sigma ** 2
+        if s2 <= 0.0:
+            return
+        for est, var in zip(estimates, variances):
+            k = min(max(1.0 - float(var) / s2, 0.0), 1.0)
+            self._sum2 += float(est) ** 2
+            self._sum_kp += k * float(var)
+            self._sum_k2 += k * k
+
+    @property
+    def sigma(self) -> float:
+        num = self.prior_weight * self.prior_sigma ** 2 + self._sum2 - self._sum_kp
+        den = self.prior_weight + self._sum_k2
+        return math.sqrt(max(num, 0.0) / den) if den > 0.0 else self.prior_sigma

@@ -38,6 +38,12 @@ class TiltFit:
     rms: float
     iterations: int
     height_variance: float = 0.0  # marginal variance of s (the tilts unknown): how well the data fix the height
+    # d s / d (tilt prior means) (roll_ref, pitch_ref, roll_cur, pitch_cur): how much of a tilt the data leave to
+    # the priors passes into the height ratio. height_variance holds sum(gain^2) tilt_sigma^2 for tilts independent
+    # between the two frames; a wobble shared by them (and by the next link) couples more (odometry.height)
+    height_tilt_gain: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    tilt_variance: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # marginal variances of params[3:7]
+    height_variance_data: float = 0.0  # height_variance less the tilt priors' part (what the image noise leaves)
 
 
 def _floor(camera: CameraModel, xn: np.ndarray, heights: np.ndarray, tilts: np.ndarray) -> np.ndarray:
@@ -90,6 +96,7 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
     wl = None if weights is None else np.linalg.cholesky(np.asarray(weights, float)).transpose(0, 2, 1)
     sigma2 = max(sigma_floor, 1e-12) ** 2
     it = 0
+    a_step = np.diag(prec)
     for it in range(1, iterations + 1):
         rk, pk, rc, pc, s = q[3:]
         pr = _floor(camera, xn_ref, [h, h, h], [(rk, pk), (rk + e, pk), (rk, pk + e)])
@@ -118,6 +125,7 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
             sigma2 = max(float(rf @ rf) / max(2 * n - 3, 1), sigma2)
         a = jf.T @ jf / sigma2 + np.diag(prec)
         g = jf.T @ rf / sigma2 + prec * (q - mu)
+        a_step = a
         try:
             step = np.linalg.solve(a, -g)
         except np.linalg.LinAlgError:
@@ -142,5 +150,14 @@ def refine_planar_tilt(camera: CameraModel, xn_ref: np.ndarray, xn_cur: np.ndarr
     except np.linalg.LinAlgError:
         return None
     cov = 0.5 * (cov_full[:3, :3] + cov_full[:3, :3].T)
+    # the estimate moves by A^-1 P per unit of prior mean (row 7, tilt columns), A the normal matrix of the
+    # Gauss-Newton steps: weighted by the rigid start's noise, not by the final residuals as the covariance is
+    try:
+        gain = np.linalg.solve(a_step, np.eye(8)[7])[3:7] * prec[3:7]
+    except np.linalg.LinAlgError:
+        gain = np.zeros(4)
     return TiltFit(delta=q[:3].copy(), covariance=cov, params=q, sigma=sigma, rms=rms,
-                   iterations=it, height_variance=float(cov_full[7, 7]))
+                   iterations=it, height_variance=float(cov_full[7, 7]),
+                   height_tilt_gain=tuple(float(g) for g in gain),
+                   tilt_variance=tuple(float(v) for v in np.diag(cov_full)[3:7]),
+                   height_variance_data=float(cov_full[7, 7] - np.sum(cov_full[7, 3:7] ** 2 * prec[3:7])))

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from odometry.height import Height, HeightTracker
+from odometry.height import Height, HeightTracker, WobbleEstimate
 from odometry.vo import VOConfig
 
 NOMINAL = 0.5
@@ -188,3 +188,57 @@ def test_the_graded_options_off_are_the_default_estimate():
             assert (d, sigma * sigma, signal) == pytest.approx((d2, v2, s2), rel=1e-12, abs=1e-18)
         a.observe(k / FPS, h)
         b.observe(k / FPS, h)
+
+
+def _chain_error_spread(coupled: bool, wobble: float, seed: int, links: int = 30) -> tuple[float, float]:
+    """(RMS chained error, RMS of its stated standard deviation) over many chains of links whose only error is
+    -gain . tilt with a slow tilt wobble of standard deviation `wobble` (correlation exp(-dt / 2 s), a link every
+    0.25 s), each link's refinement having stated sum(gain^2) tilt_sigma^2 (tilts independent)."""
+    rng = np.random.default_rng(seed)
+    gain = np.array([0.02, -0.07, 0.03, -0.12])
+    tilt_sigma, dt, tau = 0.003, 0.25, 2.0
+    rho = math.exp(-dt / tau)
+    errs, sds = [], []
+    for _ in range(300):
+        tilt = rng.normal(0, wobble, 2)
+        h = Height(0.5, t=0.0)
+        err = 0.0
+        for k in range(links):
+            new = rho * tilt + math.sqrt(1 - rho * rho) * rng.normal(0, wobble, 2)
+            err += -float(gain @ np.concatenate([tilt, new]))
+            stated = tilt_sigma ** 2 * float(gain @ gain)
+            if coupled:
+                h = h.moved_coupled(0.0, 0.0, gain, (k + 1) * dt, wobble, tau)
+            else:
+                h = h.moved(0.0, stated)
+            tilt = new
+        errs.append(err)
+        sds.append(h.variance)
+    return math.sqrt(np.mean(np.square(errs))), math.sqrt(np.mean(sds))
+
+
+def test_a_chain_of_links_sharing_a_slow_wobble_states_its_error_only_when_coupled():
+    err, stated = _chain_error_spread(False, 0.003, seed=1)
+    assert err > 2.0 * stated                        # independent tilts: the chain is far too confident
+    err, stated = _chain_error_spread(True, 0.003, seed=1)
+    assert 0.8 < err / stated < 1.25                 # the correlated wobble counted: an honest chain
+    # no wobble: nothing of the tilt prior's part is left in the chain
+    h = Height(0.5, t=0.0).moved_coupled(0.001, 2e-8, (0.02, -0.07, 0.03, -0.12), 0.25, 0.0, 2.0)
+    assert h.variance == pytest.approx(2e-8)
+    assert h.log_rel == pytest.approx(math.log1p(0.001))
+
+
+@pytest.mark.parametrize("wobble", [0.0, 0.0025])
+def test_the_wobble_estimate_finds_the_tilt_really_there(wobble):
+    # posterior means under a zero-mean prior of 0.003 rad with posterior sd 0.0005: the wobble's sd is recovered,
+    # ~0 for a camera that does not tilt
+    rng = np.random.default_rng(3)
+    prior, post = 0.003, 0.0005
+    k = 1 - post ** 2 / prior ** 2
+    est = WobbleEstimate(prior, prior_weight=20)
+    for _ in range(500):
+        true = rng.normal(0, wobble, 4)
+        noise = rng.normal(0, math.sqrt(post ** 2 / k), 4)
+        est.add(k * (true + noise), [post ** 2] * 4)
+    assert est.sigma == pytest.approx(wobble, abs=4e-4)
+    assert WobbleEstimate(prior, prior_weight=20).sigma == pytest.approx(prior)

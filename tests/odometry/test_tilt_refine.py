@@ -91,3 +91,19 @@ def test_a_tilt_prior_at_the_frames_tilts_removes_the_height_ratio_bias_of_a_com
         err_carried.append(carried.params[7])
     assert abs(np.mean(err_zero)) > 2e-4           # a biased height link (0.02 % and more)
     assert abs(np.mean(err_carried)) < 0.3 * abs(np.mean(err_zero))
+
+
+def test_the_height_tilt_gain_predicts_the_height_ratio_bias_of_a_common_pitch():
+    # the refinement's d s / d (tilt prior means) says how much of a tilt it leaves to the priors passes into the
+    # height ratio: a common pitch the zero-mean priors do not see biases s by about -gain . tilt
+    delta = np.array([0.12, 0.0, 0.0])
+    tilt = (0.0, 0.004)
+    for seed in range(3):
+        xr, xc = _views(delta, tilt, tilt, 0.5, 0.5, seed=seed, noise_px=0.0)
+        rigid = kabsch_2d(CAM.rays_to_floor(xc), CAM.rays_to_floor(xr))
+        fit = refine_planar_tilt(CAM, xr, xc, rigid, tilt_sigma=0.003, height_sigma=0.002, sigma_floor=1e-5,
+                                 iterations=4)
+        predicted = -float(np.dot(fit.height_tilt_gain, [*tilt, *tilt]))
+        assert abs(fit.params[7]) > 1e-4             # a biased height link (0.01 % and more)
+        assert abs(fit.params[7] - predicted) < 0.25 * abs(fit.params[7])
+        assert all(0.0 < v < 0.003 ** 2 for v in fit.tilt_variance)
