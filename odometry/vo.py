@@ -292,7 +292,7 @@ class VOConfig(Config):
     # each link's variance is its image-noise part plus the covariance of its tilt part (the refinement's
     # d s / d tilt) with the whole chain under a wobble of correlation exp(-dt / wobble_time) (odometry.height,
     # Height.moved_coupled): what the graded estimate's sigma_d^2 and S^2 are built on
-    height_tilt_coupling: bool = setting(False, doc="height links: count the tilt part of their error as a wobble "
+    height_tilt_coupling: bool = setting(True, doc="height links: count the tilt part of their error as a wobble "
                                                     "shared between frames over wobble_time (correlated links) "
                                                     "instead of independent per frame (needs track_height)")
     # the wobble's standard deviation, estimated from the tilts the refinement measures (odometry.height.
