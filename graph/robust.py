@@ -49,6 +49,7 @@ from graph.short_span import own_cycle_veto
 from graph.support import CycleSupport, clusters, cycle_support
 from graph.thresholds import loop_thresholds, short_span, tail_margin
 from graph.tls import admit_fitting, gnc_tls, tls_objective
+from graph.trial import map_mahalanobis
 
 __all__ = ["ConsensusProblem", "decide", "group_threshold", "gnc_tls", "robust_solve", "tls_objective"]
 
@@ -268,6 +269,14 @@ def _try_unsupported(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndar
         trial = np.zeros(cs.loops, bool)
         trial[np.argsort(ratio, kind="stable")[:params.robust.trial_max_loops]] = True
         trial &= np.isfinite(ratio)
+    if trial.any() and params.robust.trial_map_covariance:
+        # a loop that misses its threshold even with the map's own uncertainty between its ends added is wrong, not
+        # strained by drift (graph.trial). Off by default: w10000's wrong loop (50 % random) is within that
+        # uncertainty (docs/graph.md)
+        idx = np.flatnonzero(trial)
+        fits = map_mahalanobis(built.graph(inlier), values, [built.loops[i] for i in idx]) <= c2[idx]
+        cs.notes.append(f"trial: {int(fits.sum())} of {len(idx)} unsupported loops fit the map's own uncertainty")
+        trial[idx[~fits]] = False
     if not trial.any():
         return values, inlier, 0
     # judged by a GNC that includes them, so the map can move to them; a test at a solution without them would
