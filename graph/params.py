@@ -202,6 +202,15 @@ class RobustParams(Config):
                                         doc="... that quantile: the graph's own tail of short-cycle errors (2.0 x "
                                             "chi-square(0.99) on sphere2500, 10.5 x on intel, whose worst true "
                                             "short-span loop sits at 8.5 x; 0.99 put intel's at 4.2 x and lost it)")
+    readmit_short_tail: bool = setting(
+        True, unit="flag",
+        doc="the re-admission of rejected loops that agree with a kept loop (graph.readmit) judges loops at most "
+            "2 x support_window steps apart at the kept loops' own tail margin (fence_factor x their "
+            "fence_quantile of r^2, as in reach_tail) instead of calibration_margin: over a short span no drift "
+            "strain excuses a misfit, and false loops beside a true revisit agree with it and fit the global "
+            "margin once back (manhattan local 50 %, seeds 1-3: every loop re-admitted was such a loop; intel's "
+            "true re-admitted loops span 620-1272 steps); with reach_tail on it defers to it (the whole decision is "
+            "then taken again at those thresholds); docs/graph.md")
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")
