@@ -202,6 +202,15 @@ class RobustParams(Config):
                                         doc="... that quantile: the graph's own tail of short-cycle errors (2.0 x "
                                             "chi-square(0.99) on sphere2500, 10.5 x on intel, whose worst true "
                                             "short-span loop sits at 8.5 x; 0.99 put intel's at 4.2 x and lost it)")
+    readmit_short_tail: bool = setting(
+        True, unit="flag",
+        doc="the re-admission of rejected loops that agree with a kept loop (graph.readmit) judges loops at most "
+            "2 x support_window steps apart at the kept loops' own tail margin (fence_factor x their "
+            "fence_quantile of r^2, as in reach_tail) instead of calibration_margin: over a short span no drift "
+            "strain excuses a misfit, and false loops beside a true revisit agree with it and fit the global "
+            "margin once back (manhattan local 50 %, seeds 1-3: every loop re-admitted was such a loop; intel's "
+            "true re-admitted loops span 620-1272 steps); with reach_tail on it defers to it (the whole decision is "
+            "then taken again at those thresholds); docs/graph.md")
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")
@@ -210,6 +219,15 @@ class RobustParams(Config):
                                        "(a lone true loop under drift fits only once the map moves to it); more are "
                                        "only tested at the solution: long-range loops in every inner solve cost "
                                        "minutes on 10^4-node graphs")
+    trial_map_covariance: bool = setting(
+        False, unit="flag",
+        doc="before the joint trial, judge each unsupported loop by its squared Mahalanobis distance with the marginal "
+            "covariance of the solved map between its two ends added to its noise, against its own threshold "
+            "(graph.trial); a loop that misses even the map's own uncertainty is not tried. Off: it does not refuse "
+            "the wrong loop it was made for (w10000 at 50 % random, 971 -> 8215: 59x its threshold plain, 0.30x "
+            "with the map's covariance, whose relative pose between nodes 7244 steps apart is ~1 m), and with the "
+            "2D noise split by translation and rotation it sits at 15.6 x chi-square(0.99) where intel's true lone "
+            "loops reach 12.3 x: no threshold not fitted to one graph separates them (docs/graph.md)")
     group_tests: int = setting(10, range="[0, inf)", unit="clusters",
                                doc="after GNC, re-solve without each of this many kept clusters of agreeing loops "
                                    "(those nearest their thresholds first) and drop a cluster whose absence lowers "

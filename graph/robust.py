@@ -49,6 +49,7 @@ from graph.short_span import own_cycle_veto
 from graph.support import CycleSupport, clusters, cycle_support
 from graph.thresholds import loop_thresholds, short_span, tail_margin
 from graph.tls import admit_fitting, gnc_tls, tls_objective
+from graph.trial import map_mahalanobis
 
 __all__ = ["ConsensusProblem", "decide", "group_threshold", "gnc_tls", "robust_solve", "tls_objective"]
 
@@ -268,6 +269,14 @@ def _try_unsupported(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndar
         trial = np.zeros(cs.loops, bool)
         trial[np.argsort(ratio, kind="stable")[:params.robust.trial_max_loops]] = True
         trial &= np.isfinite(ratio)
+    if trial.any() and params.robust.trial_map_covariance:
+        # a loop that misses its threshold even with the map's own uncertainty between its ends added is wrong, not
+        # strained by drift (graph.trial). Off by default: w10000's wrong loop (50 % random) is within that
+        # uncertainty (docs/graph.md)
+        idx = np.flatnonzero(trial)
+        fits = map_mahalanobis(built.graph(inlier), values, [built.loops[i] for i in idx]) <= c2[idx]
+        cs.notes.append(f"trial: {int(fits.sum())} of {len(idx)} unsupported loops fit the map's own uncertainty")
+        trial[idx[~fits]] = False
     if not trial.any():
         return values, inlier, 0
     # judged by a GNC that includes them, so the map can move to them; a test at a solution without them would
@@ -294,8 +303,18 @@ def _try_unsupported(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndar
 
 def _readmit_agreeing(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray
                       ) -> tuple[gtsam.Values, np.ndarray, int]:
-    """A rejected loop that agrees with a kept one may fit only once it is in (graph.readmit)."""
+    """A rejected loop that agrees with a kept one may fit only once it is in (graph.readmit). With
+    `readmit_short_tail` (and `reach_tail` off), short-span loops are judged there at the kept loops' own tail margin
+    (`_short_tail`)."""
     built = cs.built
+    p = cs.params.robust
+    # with reach_tail the whole decision is taken again at those thresholds (its second pass passes them in here)
+    if p.readmit_short_tail and not p.reach_tail and cs.scale != 1.0:
+        # the re-admission overturns a rejection on the strength of agreement alone; a false loop a few steps beside
+        # a true revisit agrees with it and fits once in, within the global margin (manhattan local 50 %, seeds
+        # 1-3: every loop it re-admitted, 0.2-0.4x the threshold, 1.3-2.4x at the tail margin). Over a short span
+        # no drift strain excuses a misfit (`_reach_tail`)
+        c2 = _short_tail(cs, values, inlier, c2)[0]
 
     def judge(mask: np.ndarray, v0: gtsam.Values):
         # GNC over the candidates only; odometry, anchor and the kept loops are known inliers
@@ -332,6 +351,18 @@ def decide(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None = No
     return values, inlier, iters + it, t_gnc
 
 
+def _short_tail(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray
+                ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """(thresholds with the tail margin (graph.thresholds.tail_margin) of the kept loops at `values` on the
+    short-span loops (graph.thresholds.short_span), the others as `c2`; the margin; the short-span mask; r^2)."""
+    a, b = cs.data.edge_index_pairs()
+    idx = cs.built.loop_idx
+    short = short_span(np.abs(a[idx] - b[idx]), cs.params.robust.support_window)
+    r2 = cs.built.r2(values)
+    margin = tail_margin(r2[inlier], cs.sigma0, TANGENT_DIM[cs.data.dim], cs.params)
+    return np.where(short, c2 * (margin * cs.sigma0 / cs.scale), c2), margin, short, r2
+
+
 def _reach_tail(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray) -> np.ndarray | None:
     """Thresholds with the tail margin (graph.thresholds.tail_margin) on the short-span loops
     (graph.thresholds.short_span), or None when every kept short-span loop fits them at `values` (then the decision
@@ -342,12 +373,7 @@ def _reach_tail(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, 
     cover the heavy tail of the agreeing cycles and the strain a lone loop closing a long drift keeps, lets some of
     them in (manhattan local 50 %: 0.3-0.7 % of them kept). Over a short span no such strain exists, so the margin
     the kept loops' own residual tail asks for is enough."""
-    a, b = cs.data.edge_index_pairs()
-    idx = cs.built.loop_idx
-    short = short_span(np.abs(a[idx] - b[idx]), cs.params.robust.support_window)
-    r2 = cs.built.r2(values)
-    margin = tail_margin(r2[inlier], cs.sigma0, TANGENT_DIM[cs.data.dim], cs.params)
-    tight = np.where(short, c2 * (margin * cs.sigma0 / cs.scale), c2)
+    tight, margin, short, r2 = _short_tail(cs, values, inlier, c2)
     misfit = inlier & (r2 > tight)
     cs.notes.append(f"reach tail: margin {margin:.3g} x variance factor on {int(short.sum())} short-span loops, "
                  f"{int(misfit.sum())} kept ones misfit")

@@ -24,7 +24,8 @@ PEER_SLACK_REL = 0.01
 PEER_SLACK_M = 0.001
 COLUMNS = (("ours", "ours"), ("ours-isam2", "ours (iSAM2)"), ("ours-tail-off", "ours, reach_tail off"),
            ("ours-tail-on", "ours, reach_tail on"),
-           ("ours-own-off", "ours, own_cycle_test off"), ("gtsam-gnc", "GTSAM GNC"), ("dcs", "DCS (GTSAM)"),
+           ("ours-own-off", "ours, own_cycle_test off"), ("ours-trial-map-on", "ours, trial_map_covariance on"),
+           ("gtsam-gnc", "GTSAM GNC"), ("dcs", "DCS (GTSAM)"),
            ("g2o-dcs", "DCS (g2o)"), ("plain-lm", "plain LM"))
 ROBUST_PEERS = ("gtsam-gnc", "dcs", "g2o-dcs")
 STRETCH = 0.6              # fractions above this are stretch rows

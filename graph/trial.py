@@ -1,0 +1,45 @@
+"""The map's own uncertainty in the test of a loop tried against a solved map (step 4 of graph.robust).
+
+A loop's residual at a map solved without it mixes two things: the loop's own error, and how far the map between
+its ends may move. Under drift (a lone loop closing a long stretch of odometry) the map between its ends is loose,
+and a true loop misses its threshold by a few times until the map moves to it; between two nodes of a densely looped
+map it is tight, and a loop that misses there is wrong. The squared Mahalanobis distance with the marginal
+covariance of the map between the two end nodes added to the loop's noise tells the two apart:
+
+    r2_map = b^T (I + A S A^T)^-1 b
+
+with b the loop's whitened error at the solution, A its whitened Jacobian with respect to its two end poses and S
+their joint marginal covariance on the solved graph (odometry, anchor and the kept loops; gtsam.Marginals: one
+factorization, then one joint marginal per loop). It never exceeds the plain r^2 = b^T b, and is compared with the
+same threshold, in the units of the model the loops are judged on.
+"""
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+
+__all__ = ["map_mahalanobis"]
+
+
+def map_mahalanobis(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, loops: list) -> np.ndarray:
+    """r2_map (module doc) of each factor in `loops` (between factors, not in `graph`) at `values`, with the
+    marginal covariance of `graph` (the solved map) at `values`."""
+    out = np.zeros(len(loops))
+    if not loops:
+        return out
+    marginals = gtsam.Marginals(graph, values)
+    for n, f in enumerate(loops):
+        lin = f.linearize(values)
+        a, b = (int(k) for k in lin.keys())
+        A, rhs = lin.jacobian()      # whitened, columns in key order; rhs = -whitened error
+        d = A.shape[1] // 2
+        if a == b:
+            s = marginals.marginalCovariance(a)
+            J = A[:, :d] + A[:, d:]
+        else:
+            jm = marginals.jointMarginalCovariance([a, b])
+            s = np.block([[jm.at(a, a), jm.at(a, b)], [jm.at(b, a), jm.at(b, b)]])
+            J = A
+        m = np.eye(len(rhs)) + J @ s @ J.T
+        out[n] = float(rhs @ np.linalg.solve(m, rhs))
+    return out
