@@ -165,6 +165,15 @@ def narrow(pairs: Callable[[], np.ndarray]) -> Iterator[None]:
         _SCOPE.reset(token)
 
 
+def costly(pairs: Callable[[], np.ndarray]) -> bool:
+    """Whether an LM call on a graph with the edges `pairs()` would go iterative in the current scope (its direct
+    factorisation estimated above `solver.direct_max_cost`); False outside a scope or in an all-direct one."""
+    scope = _SCOPE.get()
+    if scope is None or scope.all_direct:
+        return False
+    return scope._estimate(np.asarray(pairs()))
+
+
 def pcg_parameters(params: GraphParams) -> gtsam.PCGSolverParameters:
     """PCG with a block-Jacobi preconditioner (one 3x3 / 6x6 block per pose)."""
     pcg = gtsam.PCGSolverParameters()

@@ -243,6 +243,13 @@ class RobustParams(Config):
                   "start when every confident cluster keeps loops there, else one more beside the GNC starts (the "
                   "lowest TLS objective wins). Thousands of chance-supported random false loops bent every GNC "
                   "start on w10000 at 50 % (38.9 m from the clean optimum)")
+    cluster_start: bool = setting(
+        True, doc="when the confident start does not stand alone and a solve over every candidate loop would need "
+                  "the iterative solver (its direct factorisation estimated above `solver.direct_max_cost`), decide "
+                  "over clusters of agreeing loops on a reduced graph (one representative loop per cluster, "
+                  "graph.cluster_start) instead of the GNC starts over every candidate: groups of consistent false "
+                  "loops between distant places fill in every such solve (city10000 at 50 % random-grouped: "
+                  "160-290 s, w10000 not finished in 13 min)")
     confident_min_cluster: int = setting(3, range="[2, inf)", unit="loops",
                                          doc="smallest cluster of calibrated-agreeing loops that counts as "
                                              "confident: a true revisit yields a run of consecutive agreeing loops, "

@@ -35,11 +35,12 @@ from scipy.stats import chi2
 
 from graph.batch import BuiltGraph, build, initial_guess, resolve_init, solve_lm
 from graph.calibration import VarianceFactors, scalar_factor, scale_information, split_factors
-from graph.confident import confident_first, confident_holds, confident_start
+from graph.cluster_start import cluster_starts
+from graph.confident import confident_first, confident_holds, confident_start, confident_whole
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.groups import drop_false_groups, group_threshold
 from graph.kernel_start import dcs_solve, tls_descent
-from graph.linear import narrow, solver_scope
+from graph.linear import costly, narrow, solver_scope
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod
 from graph.polish import polish
@@ -208,9 +209,18 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
     # chance-supported random false loops bend every GNC start: first a TLS descent from the map of the confident
     # loops alone, the only start when every confident cluster keeps loops there (graph.confident)
     conf_first = confident_first(cs, c2)
-    if conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best,
+    reduced = conf_first and cs.params.robust.cluster_start and costly(lambda: cs.built.pairs(cs.cand))
+    if reduced and not confident_whole(cs, c2):
+        # a confident cluster misfits whole at the confident map: its descent would reject it whole (a group of
+        # consistent false loops among the confident ones bent that map) and cannot stand alone; on a graph whose
+        # candidates fill in, that descent creeps for minutes (city10000 at 50 % random-grouped: 90 s)
+        cs.notes.append("confident start skipped: a confident cluster misfits whole at the confident map")
+        _cluster_starts(cs, c2, best)
+    elif conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best,
                                                      descent=True)):
         cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
+    elif reduced:
+        _cluster_starts(cs, c2, best)
     else:
         cs.ready()
         _gnc_starts(cs, c2, best, confident_after=not conf_first)
@@ -219,6 +229,21 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
         # won for one that lost (manhattan random-grouped 30 %, seed 3: 0.8 -> 24 m without it)
         _run_start(cs, c2, "previous decision", extra, best, descent=True)
     return best
+
+
+def _cluster_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best) -> None:
+    """The GNC starts over every candidate would factor the false groups among them (fill-in: minutes on 10^4
+    nodes): the clusters are decided on the reduced graph instead (graph.cluster_start); from each decision, GNC over
+    the loops of its kept clusters, then TLS descent over every candidate (the rejected groups misfit there and are
+    never factored)."""
+    for name, v0, members in cluster_starts(cs, c2):
+        with narrow(lambda: cs.built.pairs(members)):
+            v, kept, outer, it = gnc_tls(cs.base, cs.built.subset(members), v0, c2[members],
+                                         np.arange(int(members.sum())), cs.params)
+        best.iterations += it
+        cs.notes.append(f"{name}: GNC over the loops of the kept clusters {outer} steps, {int(kept.sum())} of "
+                        f"{int(members.sum())} kept")
+        _run_start(cs, c2, name, v, best, descent=True)
 
 
 def _gnc_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best, confident_after: bool) -> None:
