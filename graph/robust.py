@@ -208,27 +208,48 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
     best = _Best()
     # chance-supported random false loops bend every GNC start: first a TLS descent from the map of the confident
     # loops alone, the only start when every confident cluster keeps loops there (graph.confident)
-    conf_first = confident_first(cs, c2)
-    reduced = conf_first and cs.params.robust.cluster_start and costly(lambda: cs.built.pairs(cs.cand))
-    if reduced and not confident_whole(cs, c2):
-        # a confident cluster misfits whole at the confident map: its descent would reject it whole (a group of
-        # consistent false loops among the confident ones bent that map) and cannot stand alone; on a graph whose
-        # candidates fill in, that descent creeps for minutes (city10000 at 50 % random-grouped: 90 s)
-        cs.notes.append("confident start skipped: a confident cluster misfits whole at the confident map")
-        _cluster_starts(cs, c2, best)
-    elif conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best,
-                                                     descent=True)):
-        cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
-    elif reduced:
-        _cluster_starts(cs, c2, best)
+    if (cs.confident is not None and cs.params.robust.cluster_start
+            and costly(lambda: cs.built.pairs(cs.cand))):
+        _costly_starts(cs, c2, best)
     else:
-        cs.ready()
-        _gnc_starts(cs, c2, best, confident_after=not conf_first)
+        conf_first = confident_first(cs, c2)
+        if conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best,
+                                                         descent=True)):
+            cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
+        else:
+            cs.ready()
+            _gnc_starts(cs, c2, best, confident_after=not conf_first)
     if extra is not None:
         # the earlier decision, re-judged under these thresholds: the tightened test must not swap a start that
         # won for one that lost (manhattan random-grouped 30 %, seed 3: 0.8 -> 24 m without it)
         _run_start(cs, c2, "previous decision", extra, best, descent=True)
     return best
+
+
+def _costly_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best) -> None:
+    """The starts where a solve over every candidate fills in (its direct factorisation estimated above
+    `solver.direct_max_cost`; `cluster_start`): the confident start as elsewhere while it can stand alone, else the
+    clusters decided on the reduced graph (`_cluster_starts`) instead of the GNC starts over every candidate."""
+    if costly(lambda: cs.built.pairs(cs.confident[0] >= 0)):
+        # the confident loops fill in themselves: they hold many long-range groups that agree among themselves, so
+        # their map is no start free of false loops, and its LAGO / chordal factors them all (w10000 at 50 %
+        # random-grouped: ~1e12 estimated flops, no result in 4 minutes)
+        cs.notes.append("confident start skipped: the confident loops fill in")
+        _cluster_starts(cs, c2, best)
+    elif not confident_first(cs, c2):
+        # every candidate fits at the confident map (clean graphs): the supported start fits too
+        cs.ready()
+        _gnc_starts(cs, c2, best, confident_after=True)
+    elif not confident_whole(cs, c2):
+        # a confident cluster misfits whole at the confident map: the descent from there would reject it whole (a
+        # group of consistent false loops among the confident ones bent that map), so that start cannot stand
+        # alone, and the descent creeps for minutes on such a graph (city10000 at 50 % random-grouped: 90 s)
+        cs.notes.append("confident start skipped: a confident cluster misfits whole at the confident map")
+        _cluster_starts(cs, c2, best)
+    elif not confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True)):
+        _cluster_starts(cs, c2, best)
+    else:
+        cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
 
 
 def _cluster_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best) -> None:
