@@ -15,10 +15,11 @@ middle one in time), its information multiplied by the cluster's size and its GN
 thresholds (the same truncation a cluster weight of graph.tls.gnc_tls would have: the sum of n similar squared
 residuals against the sum of n thresholds). Ten parallel false loops become one long-range edge, and the reduced
 graph's fill-in is that of ~10^3 long-range edges (city10000 above: ~1.4e9). GNC over clusters runs there from two
-starts (the odometry chain; LAGO / chordal on the representatives); each result is only a start for the full
-graph: TLS descent over every candidate loop from it (graph.kernel_start.tls_descent, via graph.robust), which keeps
-the loops that fit (the false groups the reduced decision rejected do not fit and are never factored), and the
-lowest TLS objective among the starts wins, as elsewhere.
+starts (the odometry chain; LAGO / chordal on the representatives), and the one with the lower TLS objective on the
+reduced graph is the start for the full graph (graph.robust): GNC over the loops of its kept clusters (a false group
+it kept is rejected there loop by loop), then TLS descent over every candidate (graph.kernel_start.tls_descent),
+which keeps the loops that fit (the false groups the reduced decision rejected do not fit and are never factored);
+its TLS objective is compared with the other starts' as elsewhere.
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ import numpy as np
 
 from graph.batch import initial_guess
 from graph.factors import values_from_array
-from graph.linear import narrow
+from graph.linear import iterative_above
 from graph.support import clusters
 from graph.tls import gnc_tls, tls_objective
 
@@ -85,7 +86,9 @@ def cluster_starts(cs, c2: np.ndarray) -> list[tuple[str, gtsam.Values, np.ndarr
     c2_rep = thresholds[at]
     starts: list[tuple[float, str, gtsam.Values, np.ndarray]] = []
     cs.notes.append(f"cluster start: {len(rep)} clusters of {len(cand)} candidates on the reduced graph")
-    with narrow(lambda: cs.built.pairs(mask)):
+    # the reduced GNC's steps are two warm LM iterations each: where the reduced graph still fills in (its false
+    # groups as long-range edges), PCG (graph.linear) instead of the direct solve
+    with iterative_above(lambda: cs.built.pairs(mask), cs.params.robust.cluster_direct_max_cost):
         guesses = [("odometry", cs.odometry_values)]
         try:
             guess = initial_guess(cs.data, cs.stated.subset(mask), cs.method)

@@ -6,7 +6,9 @@
    so the start already carries the loop corrections however large the drift was (a start from the drifted
    odometry chain makes every true loop look like an outlier: ring, 8 m of drift). When some supported loop does
    not fit there, also GNC from the odometry chain, and when the two GNC starts keep different loops a
-   DCS-kernel solve + TLS descent (graph.kernel_start); the lowest TLS objective wins.
+   DCS-kernel solve + TLS descent (graph.kernel_start); the lowest TLS objective wins. Where a solve over every
+   candidate fills in (long-range groups of consistent false loops), the clusters are decided on a reduced graph
+   instead of those GNC starts (graph.cluster_start).
 3. GNC with truncated least squares (Yang et al. 2020), odometry and anchor as known inliers, one weight per
    cluster: a cluster's squared residual is the sum over its loops, its threshold the sum of their chi-square
    thresholds. A group of mutually consistent false loops is thus one hypothesis that the rest of the map accepts
