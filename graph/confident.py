@@ -103,3 +103,16 @@ def confident_holds(cs, inlier: np.ndarray) -> bool:
     kept = np.bincount(label[conf], weights=inlier[conf].astype(float), minlength=n)
     present = np.bincount(label[conf], minlength=n) > 0
     return bool(np.all(kept[present] > 0))
+
+
+def confident_whole(cs, c2: np.ndarray) -> bool:
+    """Whether every confident cluster has at least one loop that fits at the map of the confident loops (before
+    any descent): a cluster that misfits whole there is one the descent from it would reject whole, so the
+    confident start would not stand alone (`confident_holds`)."""
+    label = cs.confident[0]
+    conf = label >= 0
+    fit = cs.built.subset(conf).r2(cs.confident[1]()) <= c2[conf]
+    n = int(label.max()) + 1
+    kept = np.bincount(label[conf], weights=fit.astype(float), minlength=n)
+    present = np.bincount(label[conf], minlength=n) > 0
+    return bool(np.all(kept[present] > 0))

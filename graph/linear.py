@@ -165,6 +165,47 @@ def narrow(pairs: Callable[[], np.ndarray]) -> Iterator[None]:
         _SCOPE.reset(token)
 
 
+class _AllIterative:
+    """A scope in which every call is iterative (see `iterative_above`)."""
+
+    all_direct = False
+
+    def __init__(self, outer: "SolverScope"):
+        self.params = outer.params
+        self.iterative_calls = 0
+
+    @staticmethod
+    def iterative(graph: gtsam.NonlinearFactorGraph) -> bool:
+        return True
+
+
+@contextmanager
+def iterative_above(pairs: Callable[[], np.ndarray], limit: float) -> Iterator[None]:
+    """Inside the block every LM call's graph is a subgraph of the edges `pairs()` (as with `narrow`), and every
+    call is iterative when those are estimated above `limit` (else `narrow`'s choice). For solves of a few warm
+    iterations each (a GNC's steps), where PCG's slower convergence to a tight tolerance costs little. No-op outside
+    a scope or in an all-direct one."""
+    outer = _SCOPE.get()
+    if outer is None or outer.all_direct or fill_cost(np.asarray(pairs()), outer.dim) <= limit:
+        with narrow(pairs):
+            yield
+        return
+    token = _SCOPE.set(_AllIterative(outer))
+    try:
+        yield
+    finally:
+        _SCOPE.reset(token)
+
+
+def costly(pairs: Callable[[], np.ndarray]) -> bool:
+    """Whether an LM call on a graph with the edges `pairs()` would go iterative in the current scope (its direct
+    factorisation estimated above `solver.direct_max_cost`); False outside a scope or in an all-direct one."""
+    scope = _SCOPE.get()
+    if scope is None or scope.all_direct:
+        return False
+    return scope._estimate(np.asarray(pairs()))
+
+
 def pcg_parameters(params: GraphParams) -> gtsam.PCGSolverParameters:
     """PCG with a block-Jacobi preconditioner (one 3x3 / 6x6 block per pose)."""
     pcg = gtsam.PCGSolverParameters()

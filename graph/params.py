@@ -261,6 +261,19 @@ class RobustParams(Config):
                   "start when every confident cluster keeps loops there, else one more beside the GNC starts (the "
                   "lowest TLS objective wins). Thousands of chance-supported random false loops bent every GNC "
                   "start on w10000 at 50 % (38.9 m from the clean optimum)")
+    cluster_start: bool = setting(
+        True, doc="when the confident start does not stand alone and a solve over every candidate loop would need "
+                  "the iterative solver (its direct factorisation estimated above `solver.direct_max_cost`), decide "
+                  "over clusters of agreeing loops on a reduced graph (one representative loop per cluster, "
+                  "graph.cluster_start) instead of the GNC starts over every candidate: groups of consistent false "
+                  "loops between distant places fill in every such solve (city10000 at 50 % random-grouped: "
+                  "160-290 s, w10000 not finished in 13 min)")
+    cluster_direct_max_cost: float = setting(
+        1e10, range="[0, inf]", unit="flops (estimated)",
+        doc="the reduced graph of `cluster_start` is solved by PCG when its direct factorisation is estimated above "
+            "this (its GNC steps are two warm LM iterations each, where PCG's slower convergence costs little): "
+            "w10000 at 50 % random-grouped, 1.6e10: 13-17 s a step direct, ~3.7 s PCG (loaded machine); city10000 "
+            "at 50 % random-grouped, 1.4e9, stays direct (0.3-0.7 s a step)")
     confident_min_cluster: int = setting(3, range="[2, inf)", unit="loops",
                                          doc="smallest cluster of calibrated-agreeing loops that counts as "
                                              "confident: a true revisit yields a run of consecutive agreeing loops, "

@@ -6,7 +6,9 @@
    so the start already carries the loop corrections however large the drift was (a start from the drifted
    odometry chain makes every true loop look like an outlier: ring, 8 m of drift). When some supported loop does
    not fit there, also GNC from the odometry chain, and when the two GNC starts keep different loops a
-   DCS-kernel solve + TLS descent (graph.kernel_start); the lowest TLS objective wins.
+   DCS-kernel solve + TLS descent (graph.kernel_start); the lowest TLS objective wins. Where a solve over every
+   candidate fills in (long-range groups of consistent false loops), the clusters are decided on a reduced graph
+   instead of those GNC starts (graph.cluster_start).
 3. GNC with truncated least squares (Yang et al. 2020), odometry and anchor as known inliers, one weight per
    cluster: a cluster's squared residual is the sum over its loops, its threshold the sum of their chi-square
    thresholds. A group of mutually consistent false loops is thus one hypothesis that the rest of the map accepts
@@ -35,11 +37,12 @@ from scipy.stats import chi2
 
 from graph.batch import BuiltGraph, build, initial_guess, resolve_init, solve_lm
 from graph.calibration import VarianceFactors, scalar_factor, scale_information, split_factors
-from graph.confident import confident_first, confident_holds, confident_start
+from graph.cluster_start import cluster_starts
+from graph.confident import confident_first, confident_holds, confident_start, confident_whole
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.groups import drop_false_groups, group_threshold
 from graph.kernel_start import dcs_solve, tls_descent
-from graph.linear import narrow, solver_scope
+from graph.linear import costly, narrow, solver_scope
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod
 from graph.polish import polish
@@ -208,18 +211,63 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
     best = _Best()
     # chance-supported random false loops bend every GNC start: first a TLS descent from the map of the confident
     # loops alone, the only start when every confident cluster keeps loops there (graph.confident)
-    conf_first = confident_first(cs, c2)
-    if conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best,
-                                                     descent=True)):
-        cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
+    if (cs.confident is not None and cs.params.robust.cluster_start
+            and costly(lambda: cs.built.pairs(cs.cand))):
+        _costly_starts(cs, c2, best)
     else:
-        cs.ready()
-        _gnc_starts(cs, c2, best, confident_after=not conf_first)
+        conf_first = confident_first(cs, c2)
+        if conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best,
+                                                         descent=True)):
+            cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
+        else:
+            cs.ready()
+            _gnc_starts(cs, c2, best, confident_after=not conf_first)
     if extra is not None:
         # the earlier decision, re-judged under these thresholds: the tightened test must not swap a start that
         # won for one that lost (manhattan random-grouped 30 %, seed 3: 0.8 -> 24 m without it)
         _run_start(cs, c2, "previous decision", extra, best, descent=True)
     return best
+
+
+def _costly_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best) -> None:
+    """The starts where a solve over every candidate fills in (its direct factorisation estimated above
+    `solver.direct_max_cost`; `cluster_start`): the confident start as elsewhere while it can stand alone, else the
+    clusters decided on the reduced graph (`_cluster_starts`) instead of the GNC starts over every candidate."""
+    if costly(lambda: cs.built.pairs(cs.confident[0] >= 0)):
+        # the confident loops fill in themselves: they hold many long-range groups that agree among themselves, so
+        # their map is no start free of false loops, and its LAGO / chordal factors them all (w10000 at 50 %
+        # random-grouped: ~1e12 estimated flops, no result in 4 minutes)
+        cs.notes.append("confident start skipped: the confident loops fill in")
+        _cluster_starts(cs, c2, best)
+    elif not confident_first(cs, c2):
+        # every candidate fits at the confident map (clean graphs): the supported start fits too
+        cs.ready()
+        _gnc_starts(cs, c2, best, confident_after=True)
+    elif not confident_whole(cs, c2):
+        # a confident cluster misfits whole at the confident map: the descent from there would reject it whole (a
+        # group of consistent false loops among the confident ones bent that map), so that start cannot stand
+        # alone, and the descent creeps for minutes on such a graph (city10000 at 50 % random-grouped: 90 s)
+        cs.notes.append("confident start skipped: a confident cluster misfits whole at the confident map")
+        _cluster_starts(cs, c2, best)
+    elif not confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True)):
+        _cluster_starts(cs, c2, best)
+    else:
+        cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
+
+
+def _cluster_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best) -> None:
+    """The GNC starts over every candidate would factor the false groups among them (fill-in: minutes on 10^4
+    nodes): the clusters are decided on the reduced graph instead (graph.cluster_start); from each decision, GNC over
+    the loops of its kept clusters, then TLS descent over every candidate (the rejected groups misfit there and are
+    never factored)."""
+    for name, v0, members in cluster_starts(cs, c2):
+        with narrow(lambda: cs.built.pairs(members)):
+            v, kept, outer, it = gnc_tls(cs.base, cs.built.subset(members), v0, c2[members],
+                                         np.arange(int(members.sum())), cs.params)
+        best.iterations += it
+        cs.notes.append(f"{name}: GNC over the loops of the kept clusters {outer} steps, {int(kept.sum())} of "
+                        f"{int(members.sum())} kept")
+        _run_start(cs, c2, name, v, best, descent=True)
 
 
 def _gnc_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best, confident_after: bool) -> None:

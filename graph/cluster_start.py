@@ -1,0 +1,115 @@
+"""Starts for the consensus solve decided over clusters on a reduced graph: one representative loop per cluster.
+
+Why: on a graph with many groups of mutually consistent false loops between distant places (Vertigo's
+random-grouped policy: ten loops (i+k, j+k) with one claimed pose), every group passes the local support test and
+is a candidate, and any solve that holds the candidates with a non-zero weight factors thousands of long-range
+edges whose fill-in is catastrophic (city10000 at 50 % random-grouped: ~1.3e11 estimated flops per factorisation
+against ~1e8 clean). The confident start (graph.confident) is bent by those groups too (they agree pairwise under
+the calibrated noise), rejects a confident cluster whole, and the GNC starts over every candidate then ran:
+160-290 s on city10000, never finished on w10000.
+
+The loops of one cluster of agreeing loops (graph.support: both ends within `support_window` nodes, their short
+cycle closing) make one claim: they constrain the map between two stretches, and the others follow from the odometry
+at either end. So the decision over clusters can be made on a reduced graph: odometry + one loop per cluster (the
+middle one in time), its information multiplied by the cluster's size and its GNC threshold the sum of its loops'
+thresholds (the same truncation a cluster weight of graph.tls.gnc_tls would have: the sum of n similar squared
+residuals against the sum of n thresholds). Ten parallel false loops become one long-range edge, and the reduced
+graph's fill-in is that of ~10^3 long-range edges (city10000 above: ~1.4e9). GNC over clusters runs there from two
+starts (the odometry chain; LAGO / chordal on the representatives), and the one with the lower TLS objective on the
+reduced graph is the start for the full graph (graph.robust): GNC over the loops of its kept clusters (a false group
+it kept is rejected there loop by loop), then TLS descent over every candidate (graph.kernel_start.tls_descent),
+which keeps the loops that fit (the false groups the reduced decision rejected do not fit and are never factored);
+its TLS objective is compared with the other starts' as elsewhere.
+"""
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+
+from graph.batch import initial_guess
+from graph.factors import values_from_array
+from graph.linear import iterative_above
+from graph.support import clusters
+from graph.tls import gnc_tls, tls_objective
+
+
+class _Representatives:
+    """The reduced loop set in the interface gnc_tls and tls_objective read (`loops`, `r2`): one loop per cluster
+    with its information multiplied by the cluster's size."""
+
+    def __init__(self, sub, size: np.ndarray):
+        self.size = np.asarray(size, float)
+        self._sub = sub
+        self.loops = [f.cloneWithNewNoiseModel(gtsam.noiseModel.Gaussian.SqrtInformation(
+            np.sqrt(n) * np.asarray(f.noiseModel().R(), float))) for f, n in zip(sub.loops, self.size.tolist())]
+
+    def r2(self, values: gtsam.Values) -> np.ndarray:
+        return self.size * self._sub.r2(values)
+
+
+def representatives(cs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(representative loop per cluster (loop indices), cluster size, cluster label per candidate loop) over the
+    candidates of the consensus problem `cs` (graph.robust): the clusters are the connected components of the
+    agreeing pairs among the candidates; the representative is the cluster's middle loop in the order of its
+    earlier end."""
+    cand = np.flatnonzero(cs.cand)
+    p, q = cs.pairs[0], cs.pairs[1]
+    inside = cs.cand[p] & cs.cand[q]
+    pos = np.full(cs.loops, -1, np.int64)
+    pos[cand] = np.arange(len(cand))
+    label = clusters(len(cand), pos[p[inside]], pos[q[inside]])
+    a, b = cs.data.edge_index_pairs()
+    idx = cs.built.loop_idx[cand]
+    early = np.minimum(a[idx], b[idx])
+    order = np.lexsort((early, label))              # by cluster, then in time
+    sorted_label = label[order]
+    first = np.flatnonzero(np.r_[True, sorted_label[1:] != sorted_label[:-1]])
+    size = np.diff(np.r_[first, len(order)])
+    rep = cand[order[first + size // 2]]
+    return rep, size, label
+
+
+def cluster_starts(cs, c2: np.ndarray) -> list[tuple[str, gtsam.Values, np.ndarray]]:
+    """The start from GNC over clusters on the reduced graph (module doc), from the odometry chain and from LAGO /
+    chordal on odometry + the representatives, the one with the lower TLS objective on the reduced graph: [(name,
+    values, mask of the loops in its kept clusters)]. `cs`: the consensus problem (graph.robust), `c2`: the
+    thresholds of every loop."""
+    rep, size, label = representatives(cs)
+    cand = np.flatnonzero(cs.cand)
+    thresholds = np.bincount(label, weights=c2[cand], minlength=len(rep))    # rep k is cluster k's
+    mask = np.zeros(cs.loops, bool)
+    mask[rep] = True
+    sub = cs.built.subset(mask)
+    # the subset keeps loop order: map the cluster quantities to it
+    at = np.argsort(rep, kind="stable")
+    reps = _Representatives(sub, size[at])
+    c2_rep = thresholds[at]
+    starts: list[tuple[float, str, gtsam.Values, np.ndarray]] = []
+    cs.notes.append(f"cluster start: {len(rep)} clusters of {len(cand)} candidates on the reduced graph")
+    # the reduced GNC's steps are two warm LM iterations each: where the reduced graph still fills in (its false
+    # groups as long-range edges), PCG (graph.linear) instead of the direct solve
+    with iterative_above(lambda: cs.built.pairs(mask), cs.params.robust.cluster_direct_max_cost):
+        guesses = [("odometry", cs.odometry_values)]
+        try:
+            guess = initial_guess(cs.data, cs.stated.subset(mask), cs.method)
+            guesses.append(("representatives' LAGO / chordal", values_from_array(cs.data.dim, guess)))
+        except RuntimeError:
+            cs.notes.append("cluster start: LAGO / chordal on the representatives failed")
+        for name, v0 in guesses:
+            v, kept, outer, _ = gnc_tls(cs.base, reps, v0, c2_rep, np.arange(len(rep)), cs.params)
+            f = tls_objective(cs.base_graph, reps, v, c2_rep)
+            cs.notes.append(f"cluster start from {name}: GNC {outer} steps, {int(kept.sum())} of {len(rep)} "
+                            f"clusters kept, reduced TLS objective {f:.6g}")
+            starts.append((f, f"clusters from {name}", v, _members(cs, at[kept], label)))
+    # only the decision with the lowest TLS objective on the reduced graph goes on to the full graph (the expansion,
+    # a GNC over the loops of its clusters, is the costly part: 200 s for a losing start on city10000)
+    return [min(starts, key=lambda s: s[0])[1:]] if starts else []
+
+
+def _members(cs, kept_clusters: np.ndarray, label: np.ndarray) -> np.ndarray:
+    """Mask over every loop: the candidates in the kept clusters."""
+    keep = np.zeros(int(label.max()) + 1 if len(label) else 0, bool)
+    keep[kept_clusters] = True
+    mask = np.zeros(cs.loops, bool)
+    mask[np.flatnonzero(cs.cand)[keep[label]]] = True
+    return mask
