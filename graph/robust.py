@@ -462,13 +462,18 @@ def _short_tail_screen(cs: ConsensusProblem, values: gtsam.Values, inlier: np.nd
     back = 0
     for g in np.unique(component[lost]).tolist():
         member = component == g
-        trial = new | member
-        v2, it = cs.lm(cs.built.graph(trial), v, cs.params.solver.lm_max_iterations)
-        iters += it
-        if np.all(cs.built.r2(v2)[member] <= tight[member]):
+        # all back, then the misfits leave (a true loop beside a false group shares its revisit)
+        for _ in range(cs.params.robust.kernel_descent_rounds):
+            v2, it = cs.lm(cs.built.graph(new | member), v, cs.params.solver.lm_max_iterations)
+            iters += it
+            fit = member & (cs.built.r2(v2) <= tight)
+            if np.array_equal(fit, member):
+                break
+            member = fit
+        if member.any() and np.array_equal(fit, member):
             f2 = cs.objective(v2, tight)
             if f2 <= f1:
-                v, new, f1 = v2, trial, f2
+                v, new, f1 = v2, new | member, f2
                 back += int(member.sum())
     f0 = cs.objective(values, tight)
     dropped = int((inlier & ~new).sum())
