@@ -212,7 +212,7 @@ class RobustParams(Config):
             "true re-admitted loops span 620-1272 steps); with reach_tail on it defers to it (the whole decision is "
             "then taken again at those thresholds); docs/graph.md")
     short_tail_screen: bool = setting(
-        False, unit="flag",
+        True, unit="flag",
         doc="at the end of the decision, the kept loops at most 2 x support_window steps apart are left out at once, "
             "the map re-solved without them, and they are taken back by TLS descent at the kept loops' own tail "
             "margin (as readmit_short_tail); the result stands when its TLS objective there is not higher: a loop "

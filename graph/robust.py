@@ -16,6 +16,8 @@
 4. polish with the kept loops; the group-level test (each kept revisit cluster one TLS term at the chi-square
    quantile of its n x dof, dropped when the objective is lower without it); then re-admit every rejected loop
    that fits its own threshold at the solution.
+   Then the short-tail screen (`_short_tail_screen`): the kept short-span loops are judged at the kept loops' tail
+   margin on the map re-solved without them, where a false loop that bent its few steps of odometry no longer fits.
    Then the own-cycle test (graph.short_span): a kept loop between nodes a few steps apart whose cycle with the
    odometry between its ends is worse than the agreeing cycles of the kept loops is dropped.
 5. once the loop set is decided, Gauss-Newton steps on the kept loops until the map stops moving (graph.polish):
