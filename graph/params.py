@@ -211,6 +211,13 @@ class RobustParams(Config):
             "margin once back (manhattan local 50 %, seeds 1-3: every loop re-admitted was such a loop; intel's "
             "true re-admitted loops span 620-1272 steps); with reach_tail on it defers to it (the whole decision is "
             "then taken again at those thresholds); docs/graph.md")
+    short_tail_screen: bool = setting(
+        True, unit="flag",
+        doc="at the end of the decision, the kept loops at most 2 x support_window steps apart are left out at once, "
+            "the map re-solved without them, and they are taken back by TLS descent at the kept loops' own tail "
+            "margin (as readmit_short_tail); the result stands when its TLS objective there is not higher: a loop "
+            "kept from the start bends its few steps of odometry until it fits, and only the map unbent shows it "
+            "(manhattan local-grouped 50 %); graph.robust, docs/graph.md")
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")

@@ -39,7 +39,7 @@ def _local_false_loops(seed: int):
 def test_reach_tail_rejects_local_false_loops_and_keeps_true_ones(seed):
     bad, false, truth = _local_false_loops(seed)
     # the other short-span tests off (readmit_short_tail rejects these too: tests/graph/test_readmit_short_tail.py)
-    other = {"own_cycle_test": False, "readmit_short_tail": False}
+    other = {"own_cycle_test": False, "readmit_short_tail": False, "short_tail_screen": False}
     off = robust_solve(bad, GraphParams().replace(robust={"reach_tail": False, **other}))
     on = robust_solve(bad, GraphParams().replace(robust={"reach_tail": True, **other}))
     assert off.loop_inlier[false].any()          # the global margin lets them in

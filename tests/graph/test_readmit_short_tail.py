@@ -16,7 +16,7 @@ def test_local_false_loops_rejected_and_true_short_loops_kept(seed):
     # three laps of a square, 40 true loops 3-15 steps apart, 4 false ones as far apart; the other short-span tests
     # off, so what keeps the false loops out is this setting
     bad, false, truth = _local_false_loops(seed)
-    other = {"reach_tail": False, "own_cycle_test": False}
+    other = {"reach_tail": False, "own_cycle_test": False, "short_tail_screen": False}
     on = robust_solve(bad, GraphParams().replace(robust=other))
     off = robust_solve(bad, GraphParams().replace(robust={**other, "readmit_short_tail": False}))
     assert off.loop_inlier[false].any()
@@ -41,6 +41,6 @@ def test_manhattan_local_50_keeps_no_wrong_loop_and_every_true_one(manhattan):
 
 def test_manhattan_local_50_without_the_setting_keeps_wrong_loops(manhattan):
     bad, wrong, false = _local_50(manhattan, 1)
-    off = robust_solve(bad, GraphParams().replace(robust={"readmit_short_tail": False}))
+    off = robust_solve(bad, GraphParams().replace(robust={"readmit_short_tail": False, "short_tail_screen": False}))
     assert off.loop_inlier[wrong].any()
     assert off.loop_inlier[~false].all()

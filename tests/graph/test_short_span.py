@@ -14,7 +14,7 @@ from graph.short_span import own_cycle_r2
 from tests.graph.synth import compose, noisy_graph, square_laps
 from tests.graph.synth3d import _row, mis_stated_graph, position_rmse
 
-OFF = GraphParams().replace(robust={"own_cycle_test": False})
+OFF = GraphParams().replace(robust={"own_cycle_test": False, "short_tail_screen": False})
 
 
 def test_own_cycle_r2_of_a_planar_loop_is_its_offset_from_the_odometry():

@@ -66,6 +66,13 @@ def ours_own_cycle(on: bool):
     return run
 
 
+def ours_short_screen(on: bool):
+    """Ours with `robust.short_tail_screen` set either way (the default's other side, side by side in one run)."""
+    def run(data: PoseGraphData) -> MethodRun:
+        return ours(data, GraphParams().replace(robust={"short_tail_screen": on}))
+    return run
+
+
 def ours_trial_map(on: bool):
     """Ours with `robust.trial_map_covariance` set either way (the default's other side, side by side in one run)."""
     def run(data: PoseGraphData) -> MethodRun:
@@ -121,7 +128,8 @@ def g2o_dcs(data: PoseGraphData, phi: float = DCS_PHI) -> MethodRun:
 
 
 METHODS = {"ours": ours, "ours-isam2": ours_isam2, "ours-tail-off": ours_tail(False), "ours-tail-on": ours_tail(True),
-           "ours-own-off": ours_own_cycle(False), "ours-trial-map-on": ours_trial_map(True),
+           "ours-own-off": ours_own_cycle(False),
+           "ours-screen-on": ours_short_screen(True), "ours-screen-off": ours_short_screen(False), "ours-trial-map-on": ours_trial_map(True),
            "gtsam-gnc": gtsam_gnc, "dcs": dcs, "g2o-dcs": g2o_dcs, "plain-lm": plain_lm}
 # peers run on contaminated graphs only up to --peer-max-nodes (minutes per row beyond)
 PEERS_LIMITED = ("gtsam-gnc", "plain-lm", "g2o-dcs")
