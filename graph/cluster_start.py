@@ -34,8 +34,8 @@ from graph.tls import gnc_tls, tls_objective
 
 
 class _Representatives:
-    """The reduced loop set in the interface gnc_tls and tls_objective read (`loops`, `r2`): one loop per cluster
-    with its information multiplied by the cluster's size."""
+    """The reduced loop set in the interface gnc_tls and tls_objective read (`loops`, `r2`): a few loops per cluster,
+    each with its information multiplied by its share of the cluster's size."""
 
     def __init__(self, sub, size: np.ndarray):
         self.size = np.asarray(size, float)
@@ -47,11 +47,12 @@ class _Representatives:
         return self.size * self._sub.r2(values)
 
 
-def representatives(cs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(representative loop per cluster (loop indices), cluster size, cluster label per candidate loop) over the
-    candidates of the consensus problem `cs` (graph.robust): the clusters are the connected components of the
-    agreeing pairs among the candidates; the representative is the cluster's middle loop in the order of its
-    earlier end."""
+def representatives(cs, per_cluster: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(representative loops (loop indices, ascending), the cluster of each, the share of its cluster's size each
+    stands for, cluster label per candidate loop) over the candidates of the consensus problem `cs` (graph.robust):
+    the clusters are the connected components of the agreeing pairs among the candidates; the representatives are
+    `per_cluster` loops spread evenly over the cluster in the order of their earlier end (1: the middle one; 2 or
+    more: the first and the last among them), fewer where the cluster is smaller."""
     cand = np.flatnonzero(cs.cand)
     p, q = cs.pairs[0], cs.pairs[1]
     inside = cs.cand[p] & cs.cand[q]
@@ -65,8 +66,19 @@ def representatives(cs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     sorted_label = label[order]
     first = np.flatnonzero(np.r_[True, sorted_label[1:] != sorted_label[:-1]])
     size = np.diff(np.r_[first, len(order)])
-    rep = cand[order[first + size // 2]]
-    return rep, size, label
+    if per_cluster <= 1:
+        pick = [first + size // 2]
+    else:
+        pick = [first + np.rint(t * (size - 1)).astype(np.int64) for t in np.linspace(0.0, 1.0, per_cluster)]
+    at = np.concatenate(pick)
+    cl = np.tile(np.arange(len(first)), len(pick))
+    at, u = np.unique(at, return_index=True)        # small clusters: fewer distinct picks
+    cl = cl[u]
+    rep = cand[order[at]]
+    count = np.bincount(cl, minlength=len(first))
+    share = size[cl] / count[cl]
+    o = np.argsort(rep, kind="stable")
+    return rep[o], cl[o], share[o], label
 
 
 def cluster_starts(cs, c2: np.ndarray) -> list[tuple[str, gtsam.Values, np.ndarray]]:
@@ -74,18 +86,19 @@ def cluster_starts(cs, c2: np.ndarray) -> list[tuple[str, gtsam.Values, np.ndarr
     chordal on odometry + the representatives, the one with the lower TLS objective on the reduced graph: [(name,
     values, mask of the loops in its kept clusters)]. `cs`: the consensus problem (graph.robust), `c2`: the
     thresholds of every loop."""
-    rep, size, label = representatives(cs)
+    rep, cl, share, label = representatives(cs, cs.params.robust.cluster_representatives)
     cand = np.flatnonzero(cs.cand)
-    thresholds = np.bincount(label, weights=c2[cand], minlength=len(rep))    # rep k is cluster k's
+    n_cl = int(label.max()) + 1
+    thresholds = np.bincount(label, weights=c2[cand], minlength=n_cl)
+    count = np.bincount(cl, minlength=n_cl)
     mask = np.zeros(cs.loops, bool)
     mask[rep] = True
-    sub = cs.built.subset(mask)
-    # the subset keeps loop order: map the cluster quantities to it
-    at = np.argsort(rep, kind="stable")
-    reps = _Representatives(sub, size[at])
-    c2_rep = thresholds[at]
+    # rep is ascending and the subset keeps loop order: the cluster quantities align with it
+    reps = _Representatives(cs.built.subset(mask), share)
+    c2_rep = thresholds[cl] / count[cl]             # a cluster's threshold split evenly over its representatives
     starts: list[tuple[float, str, gtsam.Values, np.ndarray]] = []
-    cs.notes.append(f"cluster start: {len(rep)} clusters of {len(cand)} candidates on the reduced graph")
+    cs.notes.append(f"cluster start: {n_cl} clusters of {len(cand)} candidates on the reduced graph, "
+                    f"{len(rep)} representatives")
     # the reduced GNC's steps are two warm LM iterations each: where the reduced graph still fills in (its false
     # groups as long-range edges), PCG (graph.linear) instead of the direct solve
     with iterative_above(lambda: cs.built.pairs(mask), cs.params.robust.cluster_direct_max_cost):
@@ -96,11 +109,12 @@ def cluster_starts(cs, c2: np.ndarray) -> list[tuple[str, gtsam.Values, np.ndarr
         except RuntimeError:
             cs.notes.append("cluster start: LAGO / chordal on the representatives failed")
         for name, v0 in guesses:
-            v, kept, outer, _ = gnc_tls(cs.base, reps, v0, c2_rep, np.arange(len(rep)), cs.params)
+            v, kept, outer, _ = gnc_tls(cs.base, reps, v0, c2_rep, cl, cs.params)
             f = tls_objective(cs.base_graph, reps, v, c2_rep)
-            cs.notes.append(f"cluster start from {name}: GNC {outer} steps, {int(kept.sum())} of {len(rep)} "
+            kept_cl = np.unique(cl[kept])
+            cs.notes.append(f"cluster start from {name}: GNC {outer} steps, {len(kept_cl)} of {n_cl} "
                             f"clusters kept, reduced TLS objective {f:.6g}")
-            starts.append((f, f"clusters from {name}", v, _members(cs, at[kept], label)))
+            starts.append((f, f"clusters from {name}", v, _members(cs, kept_cl, label)))
     # only the decision with the lowest TLS objective on the reduced graph goes on to the full graph (the expansion,
     # a GNC over the loops of its clusters, is the costly part: 200 s for a losing start on city10000)
     return [min(starts, key=lambda s: s[0])[1:]] if starts else []

@@ -281,6 +281,12 @@ class RobustParams(Config):
             "this (its GNC steps are two warm LM iterations each, where PCG's slower convergence costs little): "
             "w10000 at 50 % random-grouped, 1.6e10: 13-17 s a step direct, ~3.7 s PCG (loaded machine); city10000 "
             "at 50 % random-grouped, 1.4e9, stays direct (0.3-0.7 s a step)")
+    cluster_representatives: int = setting(
+        1, range="[1, inf)", unit="loops per cluster",
+        doc="loops standing for each cluster on the reduced graph of `cluster_start` (1: its middle loop; 2 or "
+            "more: spread evenly from its first to its last loop in time, each with an even share of the cluster's "
+            "information and threshold). One edge per cluster lets the reduced GNC fit a false group by a kink of "
+            "the odometry at its ends that the group's ten parallel loops would resist (docs/graph.md)")
     confident_min_cluster: int = setting(3, range="[2, inf)", unit="loops",
                                          doc="smallest cluster of calibrated-agreeing loops that counts as "
                                              "confident: a true revisit yields a run of consecutive agreeing loops, "

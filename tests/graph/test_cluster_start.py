@@ -19,8 +19,9 @@ def test_false_groups_rejected_when_the_candidates_fill_in(laps, side, seed):
     keep[bad.loop_edges()[false]] = False
     clean = robust_solve(bad.with_edges(keep), GraphParams())
     costly = GraphParams().replace(solver={"direct_max_cost": 0.0})
-    # the reduced graph's own solves direct, by PCG (`cluster_direct_max_cost` 0), and the GNC starts instead
-    for robust in ({}, {"cluster_direct_max_cost": 0.0}, {"cluster_start": False}):
+    # the reduced graph's own solves direct, by PCG (`cluster_direct_max_cost` 0), with three loops standing for each
+    # cluster, and the GNC starts instead
+    for robust in ({}, {"cluster_direct_max_cost": 0.0}, {"cluster_representatives": 3}, {"cluster_start": False}):
         res = robust_solve(bad, costly.replace(robust=robust))
         assert res.loop_inlier[~false].all()
         assert not res.loop_inlier[false].any()
