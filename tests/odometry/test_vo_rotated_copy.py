@@ -10,10 +10,7 @@ model (its random numbers drawn in the same order), which takes seconds instead 
 """
 from __future__ import annotations
 
-import importlib.util
 import math
-import os
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -22,7 +19,7 @@ import pytest
 from odometry.shared.camera import CameraModel
 from odometry.shared.poses import between, wrap_angle
 from odometry.vo import VisualOdometry, VOConfig, VOStatus
-from tests._tools import render_floor_tool
+from tests._tools import render_floor_scene, render_floor_tool
 
 pytestmark = pytest.mark.skipif(render_floor_tool() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
 
@@ -33,19 +30,9 @@ FRAMES = list(range(0, 9 * STEP + 1, STEP))   # frames 0-9 of the benchmark sequ
 
 @pytest.fixture(scope="module")
 def views():
-    spec = importlib.util.spec_from_file_location("render_floor_tool", render_floor_tool())
-    rf = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(rf)
-    tex = Path(os.environ["VSLAM_SHARED_DATA"]) / "textures"
-    rng = np.random.default_rng(3)
-    t, xs, ys, th, _ = rf.trajectory("loop", [2.0, 1.5], 1, 0.3, 30.0)
-    x0, y0 = xs.min() - 1.0, ys.min() - 1.0
-    fw, fh = xs.max() - xs.min() + 2.0, ys.max() - ys.min() + 2.0
-    floor = rf.build_floor([str(tex / "skimage_cc0" / "grass.png"),
-                            str(tex / "gazebo_models_ccby3" / "vrc_driving_terrain__grass_dry.png")], fw, fh, rng)
-    cx, cy = (W - 1) / 2, (H - 1) / 2
-    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
-    vign = 1 - 0.25 * (((xx - cx) / cx) ** 2 + ((yy - cy) / cy) ** 2) / 2
+    sc = render_floor_scene(["skimage_cc0/grass.png", "gazebo_models_ccby3/vrc_driving_terrain__grass_dry.png"],
+                            laps=1, seed=3, size=(W, H), focal=F)
+    rng, t, xs, ys = sc.rng, sc.t, sc.xs, sc.ys
     images, bright = {}, 0.0
     for i in range(FRAMES[-1] + 1):
         # render_floor's image model, drawing its random numbers in the same order (so the frames are the
@@ -55,25 +42,18 @@ def views():
         noise = rng.normal(0, 2.0, (H, W))
         if i not in FRAMES:
             continue
-        hh, c, s = 0.5 * (1 + 0.01 * math.sin(0.7 * t[i])), math.cos(th[i]), math.sin(th[i])
-        a = np.array([[hh / F, 0.0, -cx * hh / F], [0.0, -hh / F, cy * hh / F]])
-        aw = np.array([[c, -s], [s, c]]) @ a
-        aw[:, 2] += [xs[i], ys[i]]
-        f = np.array([[1 / rf.RES, 0, -x0 / rf.RES], [0, -1 / rf.RES, (y0 + fh) / rf.RES]])
-        m = f[:, :2] @ aw
-        m[:, 2] += f[:, 2]
-        img = cv2.warpAffine(floor, m, (W, H), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                             borderMode=cv2.BORDER_REFLECT).astype(np.float32)
+        hh = sc.height(i)
+        img = sc.warp(i)
         if i > 0:
             k = int(round(math.hypot(xs[i] - xs[i - 1], ys[i] - ys[i - 1]) / (hh / F) / 3))
             if k >= 2:
                 ker = np.zeros((k, k), np.float32)
                 ker[k // 2, :] = 1.0 / k
                 img = cv2.filter2D(img, -1, ker)
-        img = img * (1.0 + 0.15 * math.sin(0.2 * t[i]) + 0.01 * bright) * vign + noise
+        img = img * (1.0 + 0.15 * math.sin(0.2 * t[i]) + 0.01 * bright) * sc.vignette + noise
         _, buf = cv2.imencode(".jpg", np.clip(img, 0, 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 95])
         images[i] = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
-    return images, t, np.column_stack([xs, ys, th])
+    return images, t, np.column_stack([xs, ys, sc.th])
 
 
 def _camera() -> CameraModel:

@@ -9,11 +9,6 @@ seconds instead of rendering all 1210 frames.
 """
 from __future__ import annotations
 
-import importlib.util
-import math
-import os
-from pathlib import Path
-
 import cv2
 import numpy as np
 import pytest
@@ -21,7 +16,7 @@ import pytest
 from odometry.shared.camera import CameraModel
 from odometry.shared.poses import between, wrap_angle
 from odometry.vo import Method, VisualOdometry, VOConfig, VOStatus
-from tests._tools import render_floor_tool
+from tests._tools import render_floor_scene, render_floor_tool
 
 pytestmark = pytest.mark.skipif(render_floor_tool() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
 
@@ -30,37 +25,17 @@ W, H, F = 640, 480, 500.0
 
 @pytest.fixture(scope="module")
 def views():
-    spec = importlib.util.spec_from_file_location("render_floor_tool", render_floor_tool())
-    rf = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(rf)
-    tex = Path(os.environ["VSLAM_SHARED_DATA"]) / "textures"
-    rng = np.random.default_rng(1)
-    t, xs, ys, th, _ = rf.trajectory("loop", [2.0, 1.5], 2, 0.3, 30.0)
-    x0, y0 = xs.min() - 1.0, ys.min() - 1.0
-    fw, fh = xs.max() - xs.min() + 2.0, ys.max() - ys.min() + 2.0
-    floor = rf.build_floor([str(tex / "skimage_cc0" / "gravel.png"),
-                            str(tex / "gazebo_models_ccby3" / "cloverleaf_interchange__concrete.png")], fw, fh, rng)
-    cx, cy = (W - 1) / 2, (H - 1) / 2
-    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
-    vign = 1 - 0.25 * (((xx - cx) / cx) ** 2 + ((yy - cy) / cy) ** 2) / 2
+    sc = render_floor_scene(["skimage_cc0/gravel.png", "gazebo_models_ccby3/cloverleaf_interchange__concrete.png"],
+                            laps=2, seed=1, size=(W, H), focal=F)
 
     def render(i: int) -> np.ndarray:
         # render_floor's image model: its height wobble, warp, vignetting, noise and JPEG 95 (no motion blur: at
         # 1/22 of the frames the blur of a 30 fps exposure is the same small smear in both views)
-        hh, c, s = 0.5 * (1 + 0.01 * math.sin(0.7 * t[i])), math.cos(th[i]), math.sin(th[i])
-        a = np.array([[hh / F, 0.0, -cx * hh / F], [0.0, -hh / F, cy * hh / F]])
-        aw = np.array([[c, -s], [s, c]]) @ a
-        aw[:, 2] += [xs[i], ys[i]]
-        f = np.array([[1 / rf.RES, 0, -x0 / rf.RES], [0, -1 / rf.RES, (y0 + fh) / rf.RES]])
-        m = f[:, :2] @ aw
-        m[:, 2] += f[:, 2]
-        img = cv2.warpAffine(floor, m, (W, H), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                             borderMode=cv2.BORDER_REFLECT).astype(np.float32)
-        img = img * vign + np.random.default_rng(i).normal(0, 2.0, img.shape)
+        img = sc.warp(i) * sc.vignette + np.random.default_rng(i).normal(0, 2.0, (H, W))
         _, buf = cv2.imencode(".jpg", np.clip(img, 0, 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 95])
         return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
 
-    return render, np.column_stack([xs, ys, th])
+    return render, np.column_stack([sc.xs, sc.ys, sc.th])
 
 
 def _camera() -> CameraModel:
