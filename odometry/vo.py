@@ -1033,11 +1033,8 @@ class VisualOdometry:
         a = out[0].delta
         # the likelihood of a copy is the prediction's own (the gate's covariance without its fallback_inflation,
         # which is a margin for the gate, not the wheel odometry's word); the gate still bounds the copies tried
-        cov = gate[1] / max(c.fallback_inflation, 1.0) + out[0].covariance \
-            + np.diag([(c.orb_threshold_px * self._m_per_px) ** 2] * 2 + [1e-4])
-        info = np.linalg.inv(cov)
-        gate_info = np.linalg.inv(gate[1] + out[0].covariance
-                                  + np.diag([(c.orb_threshold_px * self._m_per_px) ** 2] * 2 + [1e-4]))
+        info = np.linalg.inv(self._gate_covariance(gate[1] / max(c.fallback_inflation, 1.0), out[0].covariance))
+        gate_info = np.linalg.inv(self._gate_covariance(gate[1], out[0].covariance))
 
         def d2(t: np.ndarray, m: np.ndarray = info) -> float:
             e = t - t_pred
@@ -1111,8 +1108,13 @@ class VisualOdometry:
         c = self.config
         e = fit.delta - t_pred
         e[2] = wrap_angle(e[2])
-        s = cov + fit.covariance + np.diag([(c.orb_threshold_px * self._m_per_px) ** 2] * 2 + [1e-4])
+        s = self._gate_covariance(cov, fit.covariance)
         return float(e @ np.linalg.solve(s, e)) <= c.prediction_gate ** 2
+
+    def _gate_covariance(self, cov: np.ndarray, fit_cov: np.ndarray) -> np.ndarray:
+        """A motion's disagreement with a prediction of covariance `cov`: both covariances and the matcher's
+        inlier distance (and 0.01 rad) as slack."""
+        return cov + fit_cov + np.diag([(self.config.orb_threshold_px * self._m_per_px) ** 2] * 2 + [1e-4])
 
     def _model_covariance(self, dt: float, motion: np.ndarray) -> np.ndarray:
         """What the planar model misses between two frames dt apart: tilt/height wobble (see VOConfig)."""
