@@ -4,6 +4,8 @@ it; whatever is read either optimises or raises a GraphError. The long version: 
 """
 import tempfile
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -55,35 +57,38 @@ def graphs(draw, dim=None):
                          comments=comments)
 
 
-def _tmp() -> Path:
-    return Path(tempfile.mkdtemp(prefix="graphprop-"))
+@contextmanager
+def _scratch(name: str) -> Iterator[Path]:
+    # Hypothesis runs each test hundreds of times: every example's directory is removed after it.
+    with tempfile.TemporaryDirectory(prefix="graphprop-") as d:
+        yield Path(d) / name
 
 
 @FAST
 @given(graphs())
 def test_g2o_round_trip_is_exact_for_any_graph(data):
-    out = _tmp() / "g.g2o"
-    write_graph(out, data)
-    back = read_graph(out)
-    assert back.node_ids.tolist() == data.node_ids.tolist()            # Python ints, any size, exact
-    assert back.edge_from.tolist() == data.edge_from.tolist() and back.edge_to.tolist() == data.edge_to.tolist()
-    assert back.equals(data, atol=0.0)
-    assert back.comments == data.comments
+    with _scratch("g.g2o") as out:
+        write_graph(out, data)
+        back = read_graph(out)
+        assert back.node_ids.tolist() == data.node_ids.tolist()            # Python ints, any size, exact
+        assert back.edge_from.tolist() == data.edge_from.tolist() and back.edge_to.tolist() == data.edge_to.tolist()
+        assert back.equals(data, atol=0.0)
+        assert back.comments == data.comments
 
 
 @FAST
 @given(graphs())
 def test_toro_round_trip_keeps_ids_and_values(data):
-    out = _tmp() / "g.graph"
-    write_graph(out, data)
-    back = read_graph(out)
-    assert back.node_ids.tolist() == data.node_ids.tolist()
-    if data.dim == 2:
-        assert back.equals(data, atol=0.0)
-    else:   # roll / pitch / yaw on the way: the same rotation, sign of the quaternion aside
-        np.testing.assert_allclose(back.poses[:, :3], data.poses[:, :3], rtol=1e-12, atol=1e-9)
-        dots = np.abs(np.sum(back.poses[:, 3:] * data.poses[:, 3:], axis=1))
-        np.testing.assert_allclose(dots, 1.0, atol=1e-9)
+    with _scratch("g.graph") as out:
+        write_graph(out, data)
+        back = read_graph(out)
+        assert back.node_ids.tolist() == data.node_ids.tolist()
+        if data.dim == 2:
+            assert back.equals(data, atol=0.0)
+        else:   # roll / pitch / yaw on the way: the same rotation, sign of the quaternion aside
+            np.testing.assert_allclose(back.poses[:, :3], data.poses[:, :3], rtol=1e-12, atol=1e-9)
+            dots = np.abs(np.sum(back.poses[:, 3:] * data.poses[:, 3:], axis=1))
+            np.testing.assert_allclose(dots, 1.0, atol=1e-9)
 
 
 _VALID = ("# header\nVERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0.1\nVERTEX_SE2 1700000000123456789 2 0 0.2\nFIX 0\n"
@@ -153,34 +158,34 @@ def _read_or_reject(path: Path, n_lines: int):
 @FAST
 @given(corrupted())
 def test_any_corruption_is_read_or_rejected_naming_file_and_line(text):
-    p = _tmp() / "c.g2o"
-    p.write_text(text, encoding="utf-8", errors="surrogatepass")
-    _read_or_reject(p, max(1, len(p.read_bytes().splitlines()) + 1))
+    with _scratch("c.g2o") as p:
+        p.write_text(text, encoding="utf-8", errors="surrogatepass")
+        _read_or_reject(p, max(1, len(p.read_bytes().splitlines()) + 1))
 
 
 @FAST
 @given(st.binary(max_size=300))
 def test_any_bytes_are_read_or_rejected(blob):
-    p = _tmp() / "b.g2o"
-    p.write_bytes(blob)
-    _read_or_reject(p, len(blob.splitlines()) + 1)
+    with _scratch("b.g2o") as p:
+        p.write_bytes(blob)
+        _read_or_reject(p, len(blob.splitlines()) + 1)
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.one_of(degenerate(), degenerate(), corrupted()), st.sampled_from(["gnc", "none"]))
 def test_whatever_is_read_optimises_or_raises_a_graph_error(text, robust):
-    p = _tmp() / "c.g2o"
-    p.write_text(text, encoding="utf-8", errors="surrogatepass")
-    data = _read_or_reject(p, len(text.splitlines()) + 1)
-    event("read" if data is not None else "rejected")
-    if data is None:
-        return
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            res = optimize(data, GraphParams(), robust=robust)
-        except GraphError:
-            event("graph error")
+    with _scratch("c.g2o") as p:
+        p.write_text(text, encoding="utf-8", errors="surrogatepass")
+        data = _read_or_reject(p, len(text.splitlines()) + 1)
+        event("read" if data is not None else "rejected")
+        if data is None:
             return
-    assert res.poses.shape == data.poses.shape
-    assert res.node_ids.tolist() == data.node_ids.tolist()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                res = optimize(data, GraphParams(), robust=robust)
+            except GraphError:
+                event("graph error")
+                return
+        assert res.poses.shape == data.poses.shape
+        assert res.node_ids.tolist() == data.node_ids.tolist()
