@@ -11,7 +11,7 @@ import pytest
 from vslam.bench.baseline_orb_chain import naive_orb_chain
 from vslam.bench.paper_figure import paper_figure
 from vslam.bench.paper_pool import TaskPool
-from vslam.bench.paper_runs import vo_pass
+from vslam.bench.paper_runs import kept_overlap, vo_pass
 from vslam.bench.paper_tables import PAPER_TABLE_IV, table_iv, table_v
 from vslam.io import open_sequence
 from vslam.sim import SimConfig, simulate
@@ -33,7 +33,7 @@ class _Run:
     def __init__(self, mode):
         s2e = {"error_dx": 0.01, "error_dy": -0.02, "error_dtheta": 0.003}
         self.mode, self.vo, self.slam, self.vo_ate_m, self.slam_ate_m = mode, s2e, s2e, 0.5, 0.05
-        self.accepted, self.kept, self.false_kept, self.fps = 10, 8, 0, 30.0
+        self.accepted, self.kept, self.false_kept, self.kept_below_r, self.fps = 10, 8, 1, 2, 30.0
 
 
 def test_tables_put_the_papers_figures_beside_ours():
@@ -43,6 +43,30 @@ def test_tables_put_the_papers_figures_beside_ours():
     assert f"{PAPER_TABLE_IV[4][0][0]:+.4g}" in iv and "ORB chain" in iv
     v = table_v({4: {"storage_mb": 28.0, "linear_s": 5.0, "indexed_s": 0.02}}, {"storage_mb": 900.0, "linear_s": 40.0})
     assert "28.59" in v and "1213.84" in v and "SIFT" in v
+    header = [c.strip() for c in iv.splitlines()[2].split("|")]
+    row = [c.strip() for c in iv.splitlines()[4].split("|")]
+    assert row[header.index("false kept (J = 0)")] == "1" and row[header.index("kept, 0 < J < 0.33")] == "2"
+
+
+class _Loop:
+    def __init__(self, q, m):
+        self.query_frame, self.match_frame = q, m
+
+
+def test_a_kept_loop_is_false_only_when_the_footprints_do_not_overlap(tmp_path):
+    """The paper's table calls a kept loop false at J = 0 (no shared floor), not below the loop threshold 0.33:
+    a loop between footprints half overlapping is a correct constraint."""
+    simulate(SimConfig(floor="carpet", length=2.0, max_frames=80, width=320, height=240, focal=250.0), tmp_path / "s")
+    seq = open_sequence(tmp_path / "s")
+    gt = seq.groundtruth_planar()
+    cam = seq.require_camera()
+    long_side = float(np.ptp(cam.footprint(), axis=0).max())
+    along = np.cumsum(np.r_[0.0, np.hypot(*np.diff(gt[:, :2], axis=0).T)])
+    half = int(np.searchsorted(along, 0.5 * long_side))      # about half the footprint along the path
+    far = int(np.searchsorted(along, 1.5 * long_side))       # beyond the footprint: no shared floor
+    assert far < len(seq)
+    J = kept_overlap(seq, [_Loop(0, 0), _Loop(half, 0), _Loop(far, 0)])
+    assert J[0] == pytest.approx(1.0) and 0 < J[1] < 0.5 and J[2] == 0
 
 
 class _Traj:

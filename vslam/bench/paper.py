@@ -164,7 +164,8 @@ def run(args: argparse.Namespace) -> BenchResult:
                                               "storage", "sift")},
                         "chain": {"start_to_end": v["chain"]["start_to_end"], "ate_m": v["chain"]["ate_m"]},
                         "modes": [{k: getattr(m, k) for k in ("mode", "vo", "slam", "vo_ate_m", "slam_ate_m",
-                                                             "accepted", "kept", "false_kept", "fps", "seconds")}
+                                                             "accepted", "kept", "false_kept", "kept_below_r", "fps",
+                                                             "seconds")}
                                   for m in v["runs"]]}
                     for r, v in results.items()}})
     print(f"wrote {out / 'paper.json'} and {', '.join(str(figures / f'paper_{r}.png') for r in results)}")

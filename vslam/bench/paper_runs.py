@@ -16,6 +16,7 @@ import numpy as np
 
 from loops.cdvs import CdvsParams, LoopDatabase, decode, encode, match
 from odometry.shared.atomic_io import atomic_write_bytes
+from odometry.shared.footprint import DEFAULT_OVERLAP_THRESHOLD, overlap_pairs
 from odometry.vo import VOEstimate
 from vslam.bench.baseline_orb_chain import naive_orb_chain, planar_ate
 from vslam.bench.timing import median
@@ -47,7 +48,8 @@ class ModeRun:
     slam_ate_m: float
     accepted: int           # loops accepted by the detector
     kept: int               # loops kept by the back end
-    false_kept: int         # kept loops whose footprints do not overlap (ground truth)
+    false_kept: int         # kept loops whose footprints do not overlap at all (J = 0 at the true poses)
+    kept_below_r: int       # kept loops that overlap but less than the paper's loop threshold (0 < J < r)
     fps: float              # frames / (the shared VO pass's seconds + this mode's seconds after VO)
     seconds: float          # this mode's pipeline after VO (decoding, keyframes, loops, graph)
     poses_vo: np.ndarray
@@ -109,12 +111,29 @@ def run_mode(seq_path: Path, mode: int, vo: VOPass, out: Path) -> ModeRun:
     seconds = time.perf_counter() - t0
     res.write(out, sequence=seq, plots=False)
     ev = evaluate_result(res, seq)
-    kept = ev.get("loops", {}).get("kept_by_back_end", {})
+    kept = [lp for lp in res.loops if lp.accepted and lp.inlier]
+    J = kept_overlap(seq, kept)
     fps = len(res.timestamps) / (vo.seconds + seconds)
     return ModeRun(mode, ev["vo"]["start_to_end"], ev["slam"]["start_to_end"], ev["vo"]["ape_m"]["rmse"],
-                   ev["slam"]["ape_m"]["rmse"], int(sum(bool(l.accepted) for l in res.loops)),
-                   int(kept.get("reported", 0)), int(kept.get("false_positives", 0)), fps, seconds, res.poses_vo,
-                   res.poses_slam)
+                   ev["slam"]["ape_m"]["rmse"], int(sum(bool(l.accepted) for l in res.loops)), len(kept),
+                   int(np.sum(J <= 0)), int(np.sum((J > 0) & (J < DEFAULT_OVERLAP_THRESHOLD))), fps, seconds,
+                   res.poses_vo, res.poses_slam)
+
+
+def kept_overlap(seq, loops) -> np.ndarray:
+    """Footprint overlap J of each loop's two frames at their true poses. A loop is false when J = 0: the two
+    images share no floor (the issue's "non-overlapping footprints"). J < r (0.33, the paper's threshold for
+    calling a pair a loop, which evaluation's precision uses) is not: a loop measured between footprints that
+    overlap by a third is a correct constraint (on our 110 m floor the ones kept with 0.31 <= J < 0.33 are 0.33 m
+    apart along a 0.65 m footprint and measured to within 3 mm of the truth). Frames without ground truth: NaN."""
+    gt = seq.groundtruth_planar()
+    q = np.array([lp.query_frame for lp in loops], int)
+    m = np.array([lp.match_frame for lp in loops], int)
+    J = np.full(len(loops), np.nan)
+    ok = ~np.isnan(gt[q, 0]) & ~np.isnan(gt[m, 0]) if len(loops) else np.zeros(0, bool)
+    if np.any(ok):
+        J[ok] = overlap_pairs(seq.require_camera(), gt[q[ok]], gt[m[ok]])
+    return J
 
 
 def baseline_chain(seq_path: Path) -> dict:
@@ -182,7 +201,7 @@ def summary(value) -> str:
         return f"{len(value.estimates)} frames" + (" (reused from the VO cache)" if value.reused else "")
     if isinstance(value, ModeRun):
         return (f"SLAM ATE {value.slam_ate_m:.3f} m (VO {value.vo_ate_m:.3f} m), loops accepted {value.accepted} "
-                f"kept {value.kept} (false {value.false_kept}), {value.fps:.1f} frames/s")
+                f"kept {value.kept} (J = 0: {value.false_kept}, 0 < J < 0.33: {value.kept_below_r}), {value.fps:.1f} frames/s")
     if isinstance(value, dict) and "storage_mb" in value:
         return f"storage {value['storage_mb']:.2f} MB, linear match {value['linear_s']:.2f} s"
     if isinstance(value, dict) and "ate_m" in value:
