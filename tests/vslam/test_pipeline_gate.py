@@ -212,6 +212,24 @@ def test_a_loop_the_gate_cannot_tell_from_its_alias_is_refused_and_a_decidable_o
     assert all(abs(poses[m, 0] - poses[k, 0]) < 1e-9 for k, m in kept)
 
 
+def test_the_gate_says_at_which_stage_it_refused_a_candidate():
+    """Each refused candidate carries why (`GateResult.refused`), so a run can tell the alias rule's refusals from
+    the motion's: over a 20 m detour the second pass's candidates are undecidable ("alias"); with the plain gate and
+    its ambiguity margin the query's disagreeing candidates are "ambiguous"; a candidate passed has no reason."""
+    cam = camera()
+    poses = detour_passes(20.0)
+    gate = ClusterGate(MotionGate.for_camera(cam, None).fit, ChainMotion(poses, vo_drift()), MotionGateParams())
+    _query_then_add(cam, poses, gate, shortlist=500)
+    second = set(range(len(poses) - 12, len(poses)))
+    reasons = {r.refused for (c, q), r in gate.results.items() if q in second}
+    assert "alias" in reasons and "" not in reasons
+    assert all(r.refused == "" for r in gate.results.values() if r.consistent)
+    plain = MotionGate.for_camera(cam, ChainMotion(two_passes()), MotionGateParams())
+    _query_then_add(cam, two_passes(), plain, shortlist=50)
+    assert "ambiguous" in {r.refused for r in plain.results.values()}
+    assert all(r.refused in ("", "motion", "ambiguous") for r in plain.results.values())
+
+
 @pytest.mark.skipif(render_floor_tool() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
 def test_pipeline_on_a_printed_floor_accepts_no_aliased_loop_and_beats_its_vo(tmp_path):
     """Issue 13: on a printed floor no accepted loop puts the camera a tile period (0.256 m) off, and the map is

@@ -51,7 +51,7 @@ class ClusterGate(MotionGate):
             self.results[(int(candidate), int(query))] = res
             return False
         if self.params.refuse_ambiguous and not self._decidable(candidate, query, res.fit):
-            res = GateResult(False, res.mahalanobis2, res.fit)
+            res = GateResult(False, res.mahalanobis2, res.fit, "alias")
             self.results[(int(candidate), int(query))] = res
             return False
         if self.params.cluster_queries > 0 and self.lookalikes > 0 \
@@ -59,7 +59,7 @@ class ClusterGate(MotionGate):
             me = Anchor(int(candidate), int(query), res.fit.delta, res.fit.covariance)
             ok = self._supported(me)
             self.tentative.append(me)
-            res = GateResult(ok, res.mahalanobis2, res.fit)
+            res = GateResult(ok, res.mahalanobis2, res.fit, "" if ok else "cluster")
         self.results[(int(candidate), int(query))] = res
         return res.consistent
 
@@ -102,6 +102,6 @@ class ClusterGate(MotionGate):
             for c in candidates:
                 if c not in kept:
                     r = self.results[(c, query)]
-                    self.results[(c, query)] = GateResult(False, r.mahalanobis2, r.fit)
+                    self.results[(c, query)] = GateResult(False, r.mahalanobis2, r.fit, "alias")
             candidates = kept
         return super().resolve(query, candidates)

@@ -117,6 +117,10 @@ class GateResult:
     consistent: bool
     mahalanobis2: float           # inf when the loop gave no floor motion
     fit: LoopPose | None          # the loop's floor motion (pose of the query in the candidate's frame)
+    # why it was refused ("" when consistent): "no fit" (no rigid floor motion), "motion" (outside the gate),
+    # "alias" (the gate would pass the floor's alias too), "cluster" (no agreeing query nearby), "ambiguous" (the
+    # query's gated candidates disagree), so that a run can say at which stage its true loops were lost
+    refused: str = ""
 
 
 def step_drift_covariance(step: np.ndarray, drift: DriftModel, height: float = 1.0) -> np.ndarray:
@@ -231,13 +235,13 @@ class MotionGate:
     def check(self, candidate: int, query: int, v: Verification) -> GateResult:
         fit = self.fit(v)
         if fit is None:
-            return GateResult(False, float("inf"), None)
+            return GateResult(False, float("inf"), None, "no fit")
         odo, odo_cov = self.relative(candidate, query)
         r = np.asarray(fit.delta, float) - odo
         r[2] = wrap_angle(r[2])
         s = np.asarray(odo_cov, float) + self.fit_covariance(fit) + np.eye(3) * 1e-12
         d2 = float(r @ np.linalg.solve(s, r))
-        return GateResult(d2 <= self.params.chi2, d2, fit)
+        return GateResult(d2 <= self.params.chi2, d2, fit, "" if d2 <= self.params.chi2 else "motion")
 
     def __call__(self, candidate: int, query: int, v: Verification) -> bool:
         res = self.check(candidate, query, v)
@@ -269,4 +273,9 @@ class MotionGate:
         if not others:
             return group
         gap = self.results[(others[0], query)].mahalanobis2 - self.results[(best, query)].mahalanobis2
-        return group if gap >= self.params.ambiguity_margin else []
+        kept = group if gap >= self.params.ambiguity_margin else []
+        for c in candidates:
+            if c not in kept:
+                r = self.results[(c, query)]
+                self.results[(c, query)] = GateResult(False, r.mahalanobis2, r.fit, "ambiguous")
+        return kept
