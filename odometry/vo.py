@@ -177,11 +177,17 @@ class VOConfig(Config):
     cv_gate: bool = setting(True, doc="with wheel odometry, when the constant-velocity motion is known within LK's "
                                       "capture range, a descriptor or phase-correlation motion must agree with it "
                                       "(within its bound + orb_threshold_px)")
-    # LK windows (15 px) are not rotated: beyond ~20 degrees their corners move by more than LK's linear range, so
-    # the current frame is first rotated back by the predicted rotation (about the principal point: exact for a
-    # radial lens). Above the 12 degree keyframe rule, so it never acts at high frame rates.
-    lk_max_rotation: float = setting(0.35, range="[0, inf)", unit="rad",
-                                     doc="predicted rotation since the keyframe above which LK runs derotated")
+    # LK windows (15 px) are not rotated, so the current frame is first rotated back by the rotation since the
+    # keyframe (about the principal point: exact for a radial lens). Not only beyond LK's linear range (~20
+    # degrees): a window rotated by phi is a misfit of its translation-only model (its corners move by phi x
+    # 10.6 px), which biases where LK settles on edge-like texture. 0.05 rad (3 degrees, 0.5 px at the window's
+    # corners, ~5x LK's precision) derotates the frames of a turn at any frame rate (the keyframe rule renews at 12
+    # degrees): on the independent renderer's floors in turns, point errors stayed at 0.1 px instead of growing to
+    # 0.36 px by 9-12 degrees, and the 1 m drift fell ~40 % (docs/odometry.md, item 13). 0.35 was the previous
+    # default (derotate only beyond the linear range; never at high frame rates).
+    lk_max_rotation: float = setting(0.05, range="[0, inf)", unit="rad",
+                                     doc="rotation since the keyframe (predicted, measured on the predicted pixels) "
+                                         "above which LK runs on the current frame rotated back")
     descriptors: bool = setting(True, doc="ORB matching when LK fails, to initialise and to re-acquire")
     orb_features: int = setting(1500, range="[10, inf)", doc="ORB keypoints per frame on the descriptor path")
     orb_fast_threshold: int = setting(8, range="[1, 255]", unit="grey levels", doc="FAST threshold of ORB")
