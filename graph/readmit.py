@@ -81,12 +81,12 @@ def readmit_supported(built, values: gtsam.Values, inlier: np.ndarray, pair_a: n
     # support of each loop from kept and from rejected loops: a member of a rejected consistent group that happens to
     # agree with one kept loop is supported mostly by its own group (intel local-grouped 50 %, seed 2: such members
     # came back together and bent the map, 2.5 -> 7.0 cm); a true loop the GNC pushed out, by the map
+    # counts by bincount (np.add.at is ~10x slower on w10000's 10^6 pairs; integer counts, the same numbers)
     n = len(inlier)
-    by_kept, by_rejected = np.zeros(n), np.zeros(n)
-    np.add.at(by_kept, a, inlier[b])
-    np.add.at(by_kept, b, inlier[a])
-    np.add.at(by_rejected, a, ~inlier[b])
-    np.add.at(by_rejected, b, ~inlier[a])
+    ends = np.concatenate([a, b])
+    other_kept = np.concatenate([inlier[b], inlier[a]])
+    by_kept = np.bincount(ends, weights=other_kept.astype(float), minlength=n)
+    by_rejected = np.bincount(ends, weights=(~other_kept).astype(float), minlength=n)
     cand = ~inlier & (by_kept > 0) & (by_kept >= by_rejected)
     if not cand.any():
         return values, inlier, 0

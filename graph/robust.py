@@ -550,7 +550,10 @@ def _robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
                  f"trial+readmit {t_polish - t_gnc:.2f} s, polish {t_end - t_polish:.2f} s")
     r2 = stated.r2(values)
     final_cost = float(stated.graph(inlier).error(values))
-    notes.append(f"support: {len(np.union1d(cs.pairs[0], cs.pairs[1]))} of {cs.loops} loops")
+    supported = np.zeros(cs.loops, bool)     # a mask, not np.union1d: a sort of 10^6 pairs for one count
+    supported[cs.pairs[0]] = True
+    supported[cs.pairs[1]] = True
+    notes.append(f"support: {int(supported.sum())} of {cs.loops} loops")
     poses = array_from_values(data.dim, values, data.num_nodes)
     return GraphResult(data.dim, data.node_ids.copy(), poses, cs.built.loop_idx, inlier, inlier.astype(float), r2,
                        initial_cost, final_cost, iters, t_end - t_start, init_seconds, params.solver.method.value,
