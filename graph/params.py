@@ -221,6 +221,13 @@ class RobustParams(Config):
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")
+    readmit_max_loops: int = setting(
+        50, range="[0, inf)", unit="loops",
+        doc="the re-admission of rejected loops that agree with a kept loop (graph.readmit) re-solves with at most "
+            "this many of them, the nearest their threshold among those within readmit_factor of it (0: no cap); "
+            "a loop that fits only once back misses by a few times, the chance-supported false loops of a large "
+            "graph by 10-1800x, and each in the re-solve costs fill-in and LM iterations (w10000 at 50 % random: "
+            "728 candidates, 30 s of 42 s); docs/graph.md")
     trial_max_loops: int = setting(50, range="[0, inf)", unit="loops",
                                    doc="up to this many unsupported loops are tried jointly in a GNC from the solution "
                                        "(a lone true loop under drift fits only once the map moves to it); more are "

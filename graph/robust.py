@@ -387,11 +387,14 @@ def decide(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None = No
         best = _best_start(cs, c2, extra)
     values, inlier, iters = best.values, best.inlier, best.iterations
     t_gnc = time.perf_counter()
-    # 4. polish; admit the loops that fit at the solution; try the unsupported loops closest to fitting jointly
-    values, it = cs.lm(cs.built.graph(inlier), values, cs.params.solver.lm_max_iterations)
-    iters += it
-    values, inlier, it = drop_false_groups(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale, cs.method,
-                                           cs.params, cs.notes, cs.stated)
+    # 4. polish; admit the loops that fit at the solution; try the unsupported loops closest to fitting jointly.
+    # The polish and the group test solve the kept loops or fewer: one fill-in estimate for both (graph.linear)
+    kept = inlier
+    with narrow(lambda: cs.built.pairs(kept)):
+        values, it = cs.lm(cs.built.graph(inlier), values, cs.params.solver.lm_max_iterations)
+        iters += it
+        values, inlier, it = drop_false_groups(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale,
+                                               cs.method, cs.params, cs.notes, cs.stated)
     iters += it
     values, inlier, it = admit_fitting(cs.built, values, inlier, c2, cs.params, cs.notes)
     iters += it
@@ -445,6 +448,14 @@ def _short_tail_screen(cs: ConsensusProblem, values: gtsam.Values, inlier: np.nd
     judged = inlier & short
     if not judged.any() or margin >= cs.params.robust.calibration_margin:
         return values, inlier, 0
+    # every solve of the screen holds kept loops only: one fill-in estimate for all (graph.linear)
+    with narrow(lambda: cs.built.pairs(inlier)):
+        return _screen_short(cs, values, inlier, judged, tight, margin)
+
+
+def _screen_short(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, judged: np.ndarray,
+                  tight: np.ndarray, margin: float) -> tuple[gtsam.Values, np.ndarray, int]:
+    """`_short_tail_screen` once its short-span loops (`judged`) and their thresholds (`tight`) are known."""
     rest = inlier & ~judged
     v0, iters = cs.lm(cs.built.graph(rest), values, cs.params.solver.lm_max_iterations)
     if np.all(cs.built.r2(v0)[judged] <= tight[judged]):
@@ -539,7 +550,10 @@ def _robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
                  f"trial+readmit {t_polish - t_gnc:.2f} s, polish {t_end - t_polish:.2f} s")
     r2 = stated.r2(values)
     final_cost = float(stated.graph(inlier).error(values))
-    notes.append(f"support: {len(np.union1d(cs.pairs[0], cs.pairs[1]))} of {cs.loops} loops")
+    supported = np.zeros(cs.loops, bool)     # a mask, not np.union1d: a sort of 10^6 pairs for one count
+    supported[cs.pairs[0]] = True
+    supported[cs.pairs[1]] = True
+    notes.append(f"support: {int(supported.sum())} of {cs.loops} loops")
     poses = array_from_values(data.dim, values, data.num_nodes)
     return GraphResult(data.dim, data.node_ids.copy(), poses, cs.built.loop_idx, inlier, inlier.astype(float), r2,
                        initial_cost, final_cost, iters, t_end - t_start, init_seconds, params.solver.method.value,

@@ -120,3 +120,36 @@ def test_a_rejected_consistent_group_is_not_readmitted_through_one_kept_neighbou
     kept = np.asarray(res.loop_inlier, bool)
     assert kept[~false].all()
     assert (~kept[false]).mean() >= 0.987
+
+
+def test_candidates_are_the_nearest_within_the_factor():
+    from graph.readmit import nearest_candidates
+    r2 = np.array([1.0, 500.0, 3.0, 2.0, 50.0, 0.5])
+    c2 = np.ones(6)
+    cand = np.array([True, True, True, True, True, False])
+    assert np.array_equal(nearest_candidates(r2, c2, cand, 100.0, 0), [True, False, True, True, True, False])
+    assert np.array_equal(nearest_candidates(r2, c2, cand, 100.0, 2), [True, False, False, True, False, False])
+    assert not nearest_candidates(r2, c2, cand, 0.1, 0).any()
+
+
+def test_capping_the_candidates_keeps_the_same_labels_with_many_false_ones():
+    # the two lost true loops among every false loop, each paired with a kept true loop: with the candidates capped
+    # (the nearest within readmit_factor) the same loops come back as with all of them tried
+    bad, built, false, c2, objective, solve, params, judge = _setup(0.5)
+    true = ~false
+    guess = values_from_array(2, initial_guess(bad, built.subset(true), InitMethod.LAGO))
+    v_all, _ = solve(built.graph(true), guess, 100)
+    tl, fl = np.flatnonzero(true), np.flatnonzero(false)
+    lost = tl[[3, 17]]
+    inlier = true.copy()
+    inlier[lost] = False
+    v, _ = solve(built.graph(inlier), v_all, 100)
+    pa = np.concatenate([lost, fl])
+    pb = np.concatenate([tl[[2, 18]], tl[np.arange(len(fl)) % len(tl)]])
+    assert len(fl) > 4
+    kept = {}
+    for name, p in (("all", params.replace(robust={"readmit_max_loops": 0, "readmit_factor": 1e12})),
+                    ("capped", params.replace(robust={"readmit_max_loops": 4}))):
+        _, kept[name], _ = readmit_supported(built, v, inlier, pa, pb, c2, objective, solve, judge(inlier), p, [])
+    assert np.array_equal(kept["all"], true)
+    assert np.array_equal(kept["capped"], kept["all"])
