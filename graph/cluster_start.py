@@ -27,8 +27,9 @@ import gtsam
 import numpy as np
 
 from graph.batch import initial_guess
+from graph.core_start import core_start
 from graph.factors import values_from_array
-from graph.linear import iterative_above
+from graph.linear import costly, iterative_above
 from graph.support import clusters
 from graph.tls import gnc_tls, tls_objective
 
@@ -117,7 +118,19 @@ def cluster_starts(cs, c2: np.ndarray) -> list[tuple[str, gtsam.Values, np.ndarr
             starts.append((f, f"clusters from {name}", v, _members(cs, kept_cl, label)))
     # only the decision with the lowest TLS objective on the reduced graph goes on to the full graph (the expansion,
     # a GNC over the loops of its clusters, is the costly part: 200 s for a losing start on city10000)
-    return [min(starts, key=lambda s: s[0])[1:]] if starts else []
+    if not starts:
+        return []
+    chosen = min(starts, key=lambda s: s[0])[1:]
+    if cs.params.robust.core_start and costly(lambda: cs.built.pairs(chosen[2])):
+        # its kept clusters fill in: false groups among them, which the expansion would factor (graph.core_start)
+        core = core_start(cs, c2)
+        if core is not None:
+            f_reduced = cs.objective(chosen[1], c2)
+            cs.notes.append(f"TLS objective over every candidate: {f_reduced:.6g} at the reduced decision's map, "
+                            f"{core[0]:.6g} at the core's")
+            if core[0] < f_reduced:
+                return [("core of the largest confident clusters", core[1], core[2])]
+    return [chosen]
 
 
 def _members(cs, kept_clusters: np.ndarray, label: np.ndarray) -> np.ndarray:
