@@ -12,17 +12,22 @@ stretch; a group of false loops is as large as the generator of false loops make
 grown from the largest confident clusters down, one size class at a time (clusters of at least s loops, s halved
 each time), each time solved on the full graph with every loop of its clusters (LAGO / chordal, warm LM, then TLS
 descent within the core: a false group chained to a true revisit leaves there), and judged by the TLS objective
-over every candidate at its map (one residual evaluation). The growth stops before a class whose core would fill
+over every loop at its map (one residual evaluation). The growth stops before a class whose core would fill
 in (its direct factorisation estimated above `core_max_cost`: the long-range edges a map of revisits does not have,
 i.e. the false groups entering) or when the objective stops falling; the best map is the start. w10000 at 50 %
 random-grouped (seed 1): cores of 2395 to 48945 loops (12 false), objective 23484 -> 9453, 54300 of 54312 true
 loops fit at the last map and 6 of 27160 false ones; the next class (8 loops and more) would add 2163 false loops,
 estimated 1.7e10 flops against 9.6e7.
 
-It is one more start beside the reduced decision, taken where that decision's kept clusters fill in themselves
+The candidates outside the core that nearly fit its map join its loops when their whole confident cluster fits
+once the map's own uncertainty is added (`_loose_fits`): a revisit where the core leaves the map loose.
+
+It is one more start beside the reduced decision, made where that decision's kept clusters fill in themselves
 (above `solver.direct_max_cost`: their expansion would go iterative over the false groups); the lower TLS objective
-over every candidate, each at its own map, wins. City10000 at 50 % random-grouped, whose true clusters are small
-(the core of clusters of 16 and more leaves 3946 of 10511 true loops misfitting), keeps the reduced decision.
+over every loop, each at its own map, wins (w10000 seed 1: 9453 at the core's map, 29112 at the reduced one's).
+City10000 at 50 % random-grouped never makes it (its reduced decision's kept clusters are direct), and it would be
+no start there on its own: its true clusters are small, and the core of clusters of 16 and more leaves 3946 of
+10511 true loops misfitting.
 """
 from __future__ import annotations
 
@@ -37,7 +42,7 @@ from graph.trial import map_mahalanobis
 
 
 def core_start(cs, c2: np.ndarray) -> tuple[float, gtsam.Values, np.ndarray] | None:
-    """(TLS objective over every candidate at the map, the map, mask of the core's kept loops) of the best core
+    """(TLS objective over every loop at the map, the map, mask of the core's kept loops) of the best core
     (module doc), or None when no confident cluster is among the candidates or even the largest class fills in.
     `cs`: the consensus problem (graph.robust), `c2`: the thresholds of every loop."""
     if cs.confident is None:

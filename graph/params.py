@@ -292,7 +292,8 @@ class RobustParams(Config):
                   "`solver.direct_max_cost`: false groups it kept), also grow a start from the largest confident "
                   "clusters down by size class (graph.core_start) and keep whichever map has the lower TLS objective "
                   "over every candidate: the reduced graph fits a false group's one edge by a kink of the odometry "
-                  "that its ten loops resist (w10000 at 50 % random-grouped: not finished in 10 minutes without it)")
+                  "that its ten loops resist (w10000 at 50 % random-grouped: not finished in 10 minutes without it, "
+                  "176-191 s with it, every true loop kept, no wrong loop)")
     core_max_cost: float = setting(
         1e9, range="[0, inf]", unit="flops (estimated)",
         doc="the core of `core_start` stops growing before a size class whose core's direct factorisation is "
