@@ -19,7 +19,9 @@ starts (the odometry chain; LAGO / chordal on the representatives), and the one 
 reduced graph is the start for the full graph (graph.robust): GNC over the loops of its kept clusters (a false group
 it kept is rejected there loop by loop), then TLS descent over every candidate (graph.kernel_start.tls_descent),
 which keeps the loops that fit (the false groups the reduced decision rejected do not fit and are never factored);
-its TLS objective is compared with the other starts' as elsewhere.
+its TLS objective is compared with the other starts' as elsewhere. Where the loops of its kept clusters fill in
+themselves (false groups the reduced graph kept: w10000), the core of the largest confident clusters
+(graph.core_start) is made too, and the lower TLS objective over every loop, each at its own map, goes on.
 """
 from __future__ import annotations
 
@@ -27,8 +29,9 @@ import gtsam
 import numpy as np
 
 from graph.batch import initial_guess
+from graph.core_start import core_start
 from graph.factors import values_from_array
-from graph.linear import iterative_above
+from graph.linear import costly, iterative_above
 from graph.support import clusters
 from graph.tls import gnc_tls, tls_objective
 
@@ -83,8 +86,9 @@ def representatives(cs, per_cluster: int = 1) -> tuple[np.ndarray, np.ndarray, n
 
 def cluster_starts(cs, c2: np.ndarray) -> list[tuple[str, gtsam.Values, np.ndarray]]:
     """The start from GNC over clusters on the reduced graph (module doc), from the odometry chain and from LAGO /
-    chordal on odometry + the representatives, the one with the lower TLS objective on the reduced graph: [(name,
-    values, mask of the loops in its kept clusters)]. `cs`: the consensus problem (graph.robust), `c2`: the
+    chordal on odometry + the representatives, the one with the lower TLS objective on the reduced graph, or the core
+    start (graph.core_start) where the loops of that one's kept clusters fill in and the core's map has the lower TLS
+    objective over every loop: [(name, values, mask of the loops in its kept clusters)]. `cs`: the consensus problem (graph.robust), `c2`: the
     thresholds of every loop."""
     rep, cl, share, label = representatives(cs, cs.params.robust.cluster_representatives)
     cand = np.flatnonzero(cs.cand)
@@ -117,7 +121,19 @@ def cluster_starts(cs, c2: np.ndarray) -> list[tuple[str, gtsam.Values, np.ndarr
             starts.append((f, f"clusters from {name}", v, _members(cs, kept_cl, label)))
     # only the decision with the lowest TLS objective on the reduced graph goes on to the full graph (the expansion,
     # a GNC over the loops of its clusters, is the costly part: 200 s for a losing start on city10000)
-    return [min(starts, key=lambda s: s[0])[1:]] if starts else []
+    if not starts:
+        return []
+    chosen = min(starts, key=lambda s: s[0])[1:]
+    if cs.params.robust.core_start and costly(lambda: cs.built.pairs(chosen[2])):
+        # its kept clusters fill in: false groups among them, which the expansion would factor (graph.core_start)
+        core = core_start(cs, c2)
+        if core is not None:
+            f_reduced = cs.objective(chosen[1], c2)
+            cs.notes.append(f"TLS objective over every loop: {f_reduced:.6g} at the reduced decision's map, "
+                            f"{core[0]:.6g} at the core's")
+            if core[0] < f_reduced:
+                return [("core of the largest confident clusters", core[1], core[2])]
+    return [chosen]
 
 
 def _members(cs, kept_clusters: np.ndarray, label: np.ndarray) -> np.ndarray:

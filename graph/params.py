@@ -294,6 +294,19 @@ class RobustParams(Config):
             "more: spread evenly from its first to its last loop in time, each with an even share of the cluster's "
             "information and threshold). One edge per cluster lets the reduced GNC fit a false group by a kink of "
             "the odometry at its ends that the group's ten parallel loops would resist (docs/graph.md)")
+    core_start: bool = setting(
+        True, doc="where the reduced decision of `cluster_start` keeps clusters whose loops fill in themselves (above "
+                  "`solver.direct_max_cost`: false groups it kept), also grow a start from the largest confident "
+                  "clusters down by size class (graph.core_start) and keep whichever map has the lower TLS objective "
+                  "over every candidate: the reduced graph fits a false group's one edge by a kink of the odometry "
+                  "that its ten loops resist (w10000 at 50 % random-grouped: not finished in 10 minutes without it, "
+                  "176-191 s with it, every true loop kept, no wrong loop)")
+    core_max_cost: float = setting(
+        1e9, range="[0, inf]", unit="flops (estimated)",
+        doc="the core of `core_start` stops growing before a size class whose core's direct factorisation is "
+            "estimated above this: a map of revisits fills in like a clean graph (every clean graph of the benchmark "
+            "<= 4.1e8), the long-range false groups entering make it jump (w10000 at 50 % random-grouped, clusters "
+            "of 16+ -> 8+: 9.6e7 -> 1.7e10; city10000: 1.8e7 -> 5.3e9)")
     confident_min_cluster: int = setting(3, range="[2, inf)", unit="loops",
                                          doc="smallest cluster of calibrated-agreeing loops that counts as "
                                              "confident: a true revisit yields a run of consecutive agreeing loops, "
