@@ -301,6 +301,18 @@ class RobustParams(Config):
                   "over every candidate: the reduced graph fits a false group's one edge by a kink of the odometry "
                   "that its ten loops resist (w10000 at 50 % random-grouped: not finished in 10 minutes without it, "
                   "176-191 s with it, every true loop kept, no wrong loop)")
+    core_alone: bool = setting(
+        True, doc="with `core_start`: run the reduced GNC from the representatives' LAGO / chordal first; where its "
+                   "kept clusters fill in, grow the core at once, and where the core's map is decisive (at most "
+                   "`core_alone_max_split` of the confident clusters outside it split there) and has the lower TLS "
+                   "objective over every loop, it is the start and the reduced GNC from the odometry chain is "
+                   "skipped (w10000 at 50 % random-grouped: 63 s of ~100 s). Else as without it")
+    core_alone_max_split: float = setting(
+        0.01, range="[0, 1]", unit="share of the confident clusters outside the core",
+        doc="`core_alone` takes the core's map alone only when at most this share of the confident clusters with "
+            "candidates outside the core split there (some loops fit, some not): a map that explains the loops fits "
+            "a true revisit whole and misfits a false group whole (w10000 at 50 % random-grouped, seed 1: 0.0002); "
+            "a core that leaves revisits loose splits them (city10000, seed 1, clusters of 16+: 0.074)")
     core_max_cost: float = setting(
         1e9, range="[0, inf]", unit="flops (estimated)",
         doc="the core of `core_start` stops growing before a size class whose core's direct factorisation is "

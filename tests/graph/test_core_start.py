@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from graph import GraphParams
-from graph.core_start import core_start
+from graph.core_start import core_start, grow_core, split_share
 from graph.robust import _prepare, robust_solve
 from tests.graph.synth import ate, noisy_graph, square_laps
 from vslam.bench.graph_outliers import add_false_loops
@@ -38,13 +38,31 @@ def test_no_core_when_even_the_largest_clusters_fill_in():
 
 
 @pytest.mark.parametrize("laps,side,seed", [(4, 12, 1), (3, 20, 3)])
-@pytest.mark.parametrize("core", [True, False])
-def test_labels_right_when_the_cluster_path_is_taken(laps, side, seed, core):
+def test_core_map_splits_no_cluster_and_the_odometry_map_does(laps, side, seed):
+    bad, _, _ = _grouped(laps, side, seed)
+    cs, c2 = _prepare(bad, GraphParams())
+    core = grow_core(cs, c2)
+    assert split_share(cs, c2, core) == 0.0
+    # a cluster outside the core with one loop fitting and the rest not counts as split
+    label = np.where(cs.cand & ~core[2], cs.confident[0], -1)
+    ids, counts = np.unique(label[label >= 0], return_counts=True)
+    loops = np.flatnonzero(label == ids[counts >= 2][0])
+    strained = c2.copy()
+    strained[loops] = 0.0
+    strained[loops[0]] = np.inf
+    out = len(np.unique(label[label >= 0]))
+    assert split_share(cs, strained, core) == pytest.approx(1.0 / out)
+
+
+@pytest.mark.parametrize("laps,side,seed", [(4, 12, 1), (3, 20, 3)])
+@pytest.mark.parametrize("core,alone", [(True, True), (True, False), (False, False)])
+def test_labels_right_when_the_cluster_path_is_taken(laps, side, seed, core, alone):
     bad, false, truth = _grouped(laps, side, seed)
     keep = np.ones(bad.num_edges, bool)
     keep[bad.loop_edges()[false]] = False
     clean = robust_solve(bad.with_edges(keep), GraphParams())
-    res = robust_solve(bad, GraphParams().replace(solver={"direct_max_cost": 0.0}, robust={"core_start": core}))
+    res = robust_solve(bad, GraphParams().replace(solver={"direct_max_cost": 0.0}, robust={"core_start": core,
+                                                                                          "core_alone": alone}))
     assert res.loop_inlier[~false].all()
     assert not res.loop_inlier[false].any()
     assert ate(truth, res.poses) <= 1.01 * ate(truth, clean.poses) + 1e-3
