@@ -375,6 +375,31 @@ class RobustParams(Config):
     consensus_inner_iterations: int = setting(2, range="[1, inf)", unit="LM iterations",
                                               doc="warm-started LM iterations per GNC outer step (consensus mode); "
                                                   "also caps the least-squares solve of the supported-loop start")
+    # h14-gnc: a GNC step of the consensus solve changes the weights of a few loops and moves the map by a warm
+    # step; gtsam's LM re-linearises and re-factors the whole graph for it (w10000: ~0.45 s a step, 25 steps in
+    # the trial and re-admission GNCs of 50 % random). iSAM2 re-factors only the cliques the changed loops and the
+    # moved poses touch (~0.015 s for 50 re-weighted loops at w10000's optimum). Only where the scope solves the
+    # step's graph directly (graph.linear): iSAM2 has no iterative solver
+    consensus_isam2_steps: bool = setting(
+        False, doc="take the warm GNC steps of the consensus solve (graph.tls.gnc_tls) by iSAM2 updates that "
+                   "remove and re-add only the loops whose weight changed, `consensus_inner_iterations` updates "
+                   "a step, then one LM solve of the final weights from its estimate (docs/graph.md)")
+    consensus_isam2_relinearize: float = setting(
+        0.01, range="(0, inf)", unit="rad",
+        doc="iSAM2 relinearisation threshold of `consensus_isam2_steps` on a pose's rotation update (translations "
+            "never call for one: a between factor is linear in them at fixed rotations); gtsam's example 0.1 "
+            "tenfold tightened, since a label is decided on r^2 near its threshold")
+    consensus_isam2_max_changed: int = setting(
+        50, range="[0, inf)", unit="loops",
+        doc="`consensus_isam2_steps`: a GNC step that changes the weights of more loops than this is taken by LM "
+            "instead (iSAM2 would re-factor nearly the whole graph, in a worse ordering: 4.6 s for 3609 loops on "
+            "w10000 at 50 % random, against ~0.5 s by LM); 50 = `readmit_max_loops`, the candidates of the "
+            "re-admission's GNC")
+    consensus_isam2_updates: int = setting(
+        1, range="[1, inf)", unit="iSAM2 updates",
+        doc="`consensus_isam2_steps`: iSAM2 updates per GNC step (each a dogleg step on the re-linearised "
+            "part); a second update re-linearises nearly every pose, since a step moves the whole map beyond "
+            "the threshold, and costs about one LM iteration")
     consensus_binary_converge: bool = setting(
         True, doc="once every GNC weight is binary (0 or 1), solve each further outer step to convergence instead "
                   "of `consensus_inner_iterations`: the steps left are then a TLS descent, and with a few warm "
