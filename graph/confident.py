@@ -97,22 +97,23 @@ def confident_holds(cs, inlier: np.ndarray) -> bool:
     a group of mutually consistent false loops among them (bending that map, or rejected by it) or true loops it
     strains; then the GNC starts run as well and the lowest TLS objective wins. A few false loops that agree with
     the true loops of a revisit sit in its cluster and leave alone (w10000 at 50 % random: 2 of 54319)."""
-    label = cs.confident[0]
-    conf = label >= 0
-    n = int(label.max()) + 1
-    kept = np.bincount(label[conf], weights=inlier[conf].astype(float), minlength=n)
-    present = np.bincount(label[conf], minlength=n) > 0
-    return bool(np.all(kept[present] > 0))
+    conf = cs.confident[0] >= 0
+    return _every_cluster_has(cs.confident[0], inlier[conf])
 
 
 def confident_whole(cs, c2: np.ndarray) -> bool:
     """Whether every confident cluster has at least one loop that fits at the map of the confident loops (before
     any descent): a cluster that misfits whole there is one the descent from it would reject whole, so the
     confident start would not stand alone (`confident_holds`)."""
-    label = cs.confident[0]
+    conf = cs.confident[0] >= 0
+    return _every_cluster_has(cs.confident[0], cs.built.subset(conf).r2(cs.confident[1]()) <= c2[conf])
+
+
+def _every_cluster_has(label: np.ndarray, hit: np.ndarray) -> bool:
+    """Whether every confident cluster (`label` per loop, -1: in none) has a loop with `hit` (one flag per loop of
+    a cluster, in loop order)."""
     conf = label >= 0
-    fit = cs.built.subset(conf).r2(cs.confident[1]()) <= c2[conf]
     n = int(label.max()) + 1
-    kept = np.bincount(label[conf], weights=fit.astype(float), minlength=n)
+    count = np.bincount(label[conf], weights=np.asarray(hit, float), minlength=n)
     present = np.bincount(label[conf], minlength=n) > 0
-    return bool(np.all(kept[present] > 0))
+    return bool(np.all(count[present] > 0))
