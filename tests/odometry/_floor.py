@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 
 from odometry.shared.camera import CameraModel
+from odometry.shared.poses import between, wrap_angle
 
 
 def texture(shared_data, name="gazebo_models_ccby3/robocup09_spl_field__carpet.jpg") -> np.ndarray:
@@ -53,3 +54,12 @@ def camera(distortion=(0.0, 0.0, 0.0, 0.0, 0.0), mount=(0.0, 0.0, 0.0), size=(64
     f = 500.0 * w / 640
     return CameraModel(width=w, height=h, fx=f, fy=f, cx=(w - 1) / 2, cy=(h - 1) / 2, distortion=distortion,
                        camera_height=0.5, mount=mount)
+
+
+def step_errors(ests: list, gt: np.ndarray, frames: list[int]) -> np.ndarray:
+    """|error| (x, y, theta) of each VO step `ests[k].delta` against the true motion from frame frames[k-1] to
+    frames[k] (`gt`: true planar poses per frame)."""
+    idx = np.asarray(frames)
+    e = np.array([est.delta for est in ests[1:]]) - between(gt[idx[:-1]], gt[idx[1:]])
+    e[:, 2] = wrap_angle(e[:, 2])
+    return np.abs(e)

@@ -16,10 +16,9 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry.shared.camera import CameraModel
-from odometry.shared.poses import between, wrap_angle
 from odometry.vo import VisualOdometry, VOConfig, VOStatus
 from tests._tools import render_floor_scene, render_floor_tool
+from tests.odometry._floor import camera, step_errors
 
 pytestmark = pytest.mark.skipif(render_floor_tool() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
 
@@ -56,21 +55,11 @@ def views():
     return images, t, np.column_stack([xs, ys, sc.th])
 
 
-def _camera() -> CameraModel:
-    return CameraModel(width=W, height=H, fx=F, fy=F, cx=(W - 1) / 2, cy=(H - 1) / 2,
-                       distortion=(0.0, 0.0, 0.0, 0.0, 0.0), camera_height=0.5, mount=(0.0, 0.0, 0.0))
-
-
 def _errors(views, config: VOConfig):
     images, t, gt = views
-    vo = VisualOdometry(_camera(), config)
+    vo = VisualOdometry(camera(), config)
     ests = [vo.process(images[f], t[f]) for f in FRAMES]
-    errs = []
-    for k in range(1, len(FRAMES)):
-        e = ests[k].delta - between(gt[FRAMES[k - 1]], gt[FRAMES[k]])
-        e[2] = wrap_angle(e[2])
-        errs.append(e)
-    return ests, np.abs(np.array(errs))
+    return ests, step_errors(ests, gt, FRAMES)
 
 
 @pytest.mark.parametrize("seed", range(6))

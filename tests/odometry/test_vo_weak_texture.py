@@ -13,10 +13,9 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry.shared.camera import CameraModel
-from odometry.shared.poses import between, wrap_angle
 from odometry.vo import Method, VisualOdometry, VOConfig, VOStatus
 from tests._tools import render_floor_scene, render_floor_tool
+from tests.odometry._floor import camera, step_errors
 
 pytestmark = pytest.mark.skipif(render_floor_tool() is None, reason="needs VSLAM_SHARED_DATA and ../tools/render_floor.py")
 
@@ -38,21 +37,11 @@ def views():
     return render, np.column_stack([sc.xs, sc.ys, sc.th])
 
 
-def _camera() -> CameraModel:
-    return CameraModel(width=W, height=H, fx=F, fy=F, cx=(W - 1) / 2, cy=(H - 1) / 2,
-                       distortion=(0.0, 0.0, 0.0, 0.0, 0.0), camera_height=0.5, mount=(0.0, 0.0, 0.0))
-
-
 def _run(views, frames, config=None):
     render, gt = views
-    vo = VisualOdometry(_camera(), config or VOConfig())
+    vo = VisualOdometry(camera(), config or VOConfig())
     ests = [vo.process(render(f), k / 1.36) for k, f in enumerate(frames)]
-    errs = []
-    for k in range(1, len(frames)):
-        e = ests[k].delta - between(gt[frames[k - 1]], gt[frames[k]])
-        e[2] = wrap_angle(e[2])
-        errs.append(e)
-    return ests, np.abs(np.array(errs))
+    return ests, step_errors(ests, gt, frames)
 
 
 def test_a_turn_over_bare_concrete_is_tracked_by_the_dense_orb_retry(views):
