@@ -38,7 +38,7 @@ from graph.batch import initial_guess
 from graph.factors import values_from_array
 from graph.kernel_start import tls_descent
 from graph.linear import fill_cost, narrow
-from graph.trial import map_mahalanobis
+from graph.trial import MapUncertainty
 
 
 def core_start(cs, c2: np.ndarray) -> tuple[float, gtsam.Values, np.ndarray] | None:
@@ -146,9 +146,14 @@ def _loose_fits(cs, c2: np.ndarray, values: gtsam.Values, kept: np.ndarray) -> n
     if not near.any():
         return out
     idx = np.flatnonzero(near)
-    fits = map_mahalanobis(cs.built.graph(kept), values, [cs.built.loops[i] for i in idx]) <= c2[idx]
-    misfit = np.bincount(unit[idx[~fits]], minlength=int(unit.max()) + 1) > 0
-    out[idx[fits & ~misfit[unit[idx]]]] = True
+    # a unit joins only when every near loop of it fits: its loops are asked farthest from their threshold first and
+    # the unit is left at its first misfit (one joint marginal a loop, ~20 ms on 10^4 nodes)
+    order = idx[np.lexsort((-(r2[idx] / c2[idx]), unit[idx]))]
+    start = np.flatnonzero(np.r_[True, unit[order][1:] != unit[order][:-1]])
+    m = MapUncertainty(cs.built.graph(kept), values)
+    for members in np.split(order, start[1:]):
+        if all(m.r2(cs.built.loops[i]) <= c2[i] for i in members.tolist()):
+            out[members] = True
     cs.notes.append(f"core start: {int(out.sum())} of {len(idx)} candidates near their thresholds fit the core "
                     f"map's own uncertainty with the rest of their cluster, added to its loops")
     return out
