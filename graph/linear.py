@@ -31,10 +31,21 @@ from graph.params import GraphParams
 _SCOPE: contextvars.ContextVar["SolverScope | _AllDirect | None"] = contextvars.ContextVar("graph_linear_scope", default=None)
 
 
-def fill_cost(pairs: np.ndarray, dim: int) -> float:
+# a capped estimate eliminates the ordering in slices ending at these shares of the nodes, checking the cap after
+# each: few slices (each one copies the graph left), finer where the cost of a graph far above a cap passes it
+FILL_SLICES = (0.25, 0.375, 0.5, 0.75, 1.0)
+
+
+def fill_cost(pairs: np.ndarray, dim: int, cap: float = np.inf) -> float:
     """Estimated flops of a sparse Cholesky factorisation of the normal equations of a pose graph whose factors
     join the node pairs `pairs` ((E, 2) keys; a unary factor as (k, k)): COLAMD ordering, symbolic elimination,
-    sum over the eliminated nodes of tangent_dim^3 x (column count in nodes)^2."""
+    sum over the eliminated nodes of tangent_dim^3 x (column count in nodes)^2.
+
+    With a finite `cap` the elimination stops once the nodes eliminated so far cost more than `cap`, and that
+    partial sum (a lower bound, > cap) is returned: a node's column count depends only on the graph and the nodes
+    eliminated before it, so the sum over a prefix of the ordering is exact for those nodes, and the symbolic work
+    of the slices not reached is saved (w10000 + 50 % random-grouped false loops, 1.7e12: 2.1 s for the whole
+    elimination, the first 3e10 within its first third of the nodes, ~0.1 s)."""
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
     if not len(pairs):
         return 0.0
@@ -48,10 +59,29 @@ def fill_cost(pairs: np.ndarray, dim: int) -> float:
             sfg.push_factor(i)
         else:
             sfg.push_factor(i, j)
-    net = sfg.eliminateSequential(gtsam.Ordering.ColamdSymbolicFactorGraph(sfg))
+    d3 = (3.0 if dim == 2 else 6.0) ** 3
+    ordering = gtsam.Ordering.ColamdSymbolicFactorGraph(sfg)
+    if not np.isfinite(cap):
+        return d3 * _count_cost(sfg.eliminateSequential(ordering))
+    keys = [ordering.at(i) for i in range(ordering.size())]
+    total, lo = 0.0, 0
+    for share in FILL_SLICES:
+        hi = len(keys) if share >= 1.0 else int(share * len(keys))
+        part = gtsam.Ordering()
+        for k in keys[lo:hi]:
+            part.push_back(k)
+        lo = hi
+        net, sfg = sfg.eliminatePartialSequential(part)
+        total += d3 * _count_cost(net)
+        if total > cap:
+            break
+    return total
+
+
+def _count_cost(net) -> float:
+    """Sum over a symbolic Bayes net's conditionals of (column count in nodes)^2."""
     counts = np.fromiter((net.at(k).nrParents() + 1 for k in range(net.size())), float, net.size())
-    d = 3.0 if dim == 2 else 6.0
-    return float(d ** 3 * np.sum(counts ** 2))
+    return float(np.sum(counts ** 2))
 
 
 def graph_pairs(graph: gtsam.NonlinearFactorGraph) -> np.ndarray:
@@ -131,7 +161,7 @@ class SolverScope:
         for known_width, known in self._dear:
             if known_width == width and np.isin(known, codes, assume_unique=True).all():
                 return True
-        dear = fill_cost(pairs, self.dim) > self.limit
+        dear = fill_cost(pairs, self.dim, self.limit) > self.limit
         (self._dear if dear else self._cheap).append((width, codes))
         del (self._dear if dear else self._cheap)[:-self.KNOWN]
         return dear
@@ -192,7 +222,7 @@ def iterative_above(pairs: Callable[[], np.ndarray], limit: float) -> Iterator[N
     iterations each (a GNC's steps), where PCG's slower convergence to a tight tolerance costs little. No-op outside
     a scope or in an all-direct one."""
     outer = _SCOPE.get()
-    if outer is None or outer.all_direct or fill_cost(np.asarray(pairs()), outer.dim) <= limit:
+    if outer is None or outer.all_direct or fill_cost(np.asarray(pairs()), outer.dim, limit) <= limit:
         with narrow(pairs):
             yield
         return
