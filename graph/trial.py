@@ -29,6 +29,20 @@ class MapUncertainty:
         self.values = values
         self.marginals = gtsam.Marginals(graph, values)
 
+    def lower(self, f) -> float:
+        """A lower bound of `r2` from the two end poses' own marginals (cached per clique by gtsam, far cheaper than
+        their joint): Cov(Ja da + Jb db) <= 2 (Ja Saa Ja^T + Jb Sbb Jb^T), so (I + that bound)^-1 <= (I + A S A^T)^-1."""
+        lin = f.linearize(self.values)
+        a, b = (int(k) for k in lin.keys())
+        A, rhs = lin.jacobian()
+        d = A.shape[1] // 2
+        if a == b:
+            return self.r2(f)
+        Ja, Jb = A[:, :d], A[:, d:]
+        m = np.eye(len(rhs)) + 2.0 * (Ja @ self.marginals.marginalCovariance(a) @ Ja.T
+                                      + Jb @ self.marginals.marginalCovariance(b) @ Jb.T)
+        return float(rhs @ np.linalg.solve(m, rhs))
+
     def r2(self, f) -> float:
         """r2_map of the between factor `f` (not in the solved graph) at the solved values."""
         lin = f.linearize(self.values)
