@@ -58,3 +58,17 @@ def test_iterative_solve_reaches_the_direct_optimum():
         assert ate(direct.poses, pcg.poses) < 1e-3
         assert abs(ate(truth, pcg.poses) - ate(truth, direct.poses)) < 1e-3
         assert abs(pcg.final_cost - direct.final_cost) <= 1e-3 * direct.final_cost
+
+
+def test_capped_fill_cost_is_exact_below_its_cap_and_above_it_once_passed():
+    n = 400
+    chain = np.column_stack([np.arange(n - 1), np.arange(1, n)])
+    rng = np.random.default_rng(1)
+    far = rng.integers(0, n, (300, 2))
+    far = far[far[:, 0] != far[:, 1]]
+    for pairs in (chain, np.vstack([chain, far])):
+        full = fill_cost(pairs, 2)
+        assert fill_cost(pairs, 2, cap=2 * full) == full        # never passed: the whole elimination, same sum
+        low = full / 1000
+        capped = fill_cost(pairs, 2, cap=low)
+        assert low < capped <= full                               # stopped once past the cap: a lower bound

@@ -11,7 +11,7 @@ from scipy.stats import chi2
 from graph import GraphParams, optimize
 from graph.batch import build
 from graph.factors import values_from_array
-from graph.trial import map_mahalanobis
+from graph.trial import MapUncertainty, map_mahalanobis
 from tests.graph.synth import ate, noisy_graph, square_laps
 from tests.graph.test_consensus_trial import lone_loop_graph
 
@@ -59,3 +59,13 @@ def test_setting_on_keeps_the_lone_true_loop_among_many_unsupported_false_loops(
     assert res.loop_inlier[~false].all()
     assert not res.loop_inlier[false].any()
     assert ate(truth, res.poses) <= 1.01 * ate(truth, plain.poses) + 1e-6
+
+
+def test_bound_from_the_end_poses_own_marginals_never_exceeds_the_joint_distance():
+    built, values, kept = _drift_map()
+    m = MapUncertainty(built.graph(kept), values)
+    exact = map_mahalanobis(built.graph(kept), values, built.loops[-2:])
+    lower = np.array([m.lower(f) for f in built.loops[-2:]])
+    assert np.allclose([m.r2(f) for f in built.loops[-2:]], exact)
+    assert np.all(lower <= exact + 1e-9)
+    assert lower[1] > 10 * chi2.ppf(0.99, 3)          # the wrong loop in a looped stretch misses even the bound
