@@ -333,7 +333,11 @@ def _try_unsupported(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndar
         # none, the whole-graph GNC is not run (w10000 at 50 % random: ~13 whole-graph solves that keep none)
         known = cs.base + [f for f, k in zip(built.loops, inlier.tolist()) if k]
         idx = np.flatnonzero(trial)
-        if not reduced_gnc(known, values, [built.loops[i] for i in idx], c2[idx], cs.data.dim, params).any():
+        try:
+            forecast = reduced_gnc(known, values, [built.loops[i] for i in idx], c2[idx], cs.data.dim, params)
+        except RuntimeError:          # an indeterminate marginal: no forecast, the trial runs
+            forecast = np.ones(len(idx), bool)
+        if not forecast.any():
             cs.notes.append(f"trial: none of {len(idx)} unsupported loops kept on the marginal of the solved map")
             trial[:] = False
     if not trial.any():
