@@ -111,6 +111,18 @@ class SolverScope:
             self._pairs = None
         return self._all_direct
 
+    def narrow_dear(self, pairs: Callable[[], np.ndarray]) -> bool | None:
+        """For `narrow`: None when the whole graph is under the limit (every call direct), else whether the subgraph
+        `pairs()` is above it. While the whole graph is not estimated yet a proper subgraph goes first, and one above
+        the limit settles the whole graph as above too (fill-in only grows with edges)."""
+        if self._all_direct is None:
+            sub = np.asarray(pairs())
+            if len(sub) < len(self._whole()) and self._estimate(sub):
+                self._all_direct = False
+                return True
+            return None if self.all_direct else self._estimate(sub)
+        return None if self._all_direct else self._estimate(np.asarray(pairs()))
+
     def _whole(self) -> np.ndarray:
         if callable(self._pairs):
             self._pairs = np.asarray(self._pairs())
@@ -171,25 +183,10 @@ def narrow(pairs: Callable[[], np.ndarray]) -> Iterator[None]:
     loops are all outside its candidates: city10000 at 50 % random). No-op outside a scope or when the scope is
     all direct; `pairs` is only called when needed."""
     outer = _SCOPE.get()
-    if outer is None:
+    dear = outer.narrow_dear(pairs) if isinstance(outer, SolverScope) else None
+    if dear is None:
         yield
         return
-    if getattr(outer, "_all_direct", True) is None:
-        # the whole graph not estimated yet: a proper subgraph first; above the limit, so is the whole graph
-        sub = np.asarray(pairs())
-        dear = len(sub) < len(outer._whole()) and outer._estimate(sub)
-        if dear:
-            outer._all_direct = False
-        elif outer.all_direct:
-            yield
-            return
-        else:
-            dear = outer._estimate(sub)
-    elif outer.all_direct:
-        yield
-        return
-    else:
-        dear = outer._estimate(np.asarray(pairs()))
     token = _SCOPE.set(_DIRECT if not dear else outer)
     try:
         yield

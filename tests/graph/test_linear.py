@@ -58,3 +58,22 @@ def test_iterative_solve_reaches_the_direct_optimum():
         assert ate(direct.poses, pcg.poses) < 1e-3
         assert abs(ate(truth, pcg.poses) - ate(truth, direct.poses)) < 1e-3
         assert abs(pcg.final_cost - direct.final_cost) <= 1e-3 * direct.final_cost
+
+
+def test_the_scope_verdict_is_the_whole_graphs_whether_a_subgraph_is_estimated_first_or_not():
+    from graph.linear import narrow, solver_scope
+
+    data, _ = _long_range(extra=120)
+    a, b = data.edge_index_pairs()
+    pairs = np.column_stack([a, b])
+    sub = pairs[:-60]
+    whole_cost, sub_cost = fill_cost(pairs, 2), fill_cost(sub, 2)
+    assert sub_cost < whole_cost
+    for limit in (0.5 * sub_cost, 0.5 * (sub_cost + whole_cost), 2.0 * whole_cost):
+        params = GraphParams().replace(solver={"direct_max_cost": limit})
+        with solver_scope(pairs, 2, params) as scope:
+            with narrow(lambda: sub):
+                pass
+            assert scope.all_direct == (whole_cost <= limit)
+        with solver_scope(pairs, 2, params) as scope:
+            assert scope.all_direct == (whole_cost <= limit)
