@@ -45,7 +45,8 @@ def spanning_tree_guess(data: PoseGraphData, anchors: np.ndarray, anchor_poses: 
                 (dq.append if is_loop[e] else dq.appendleft)(v)
     # compose along the tree: walk up from each node to the first one already placed, then back down
     poses = [None] * n
-    meas = [to_pose(dim, z) for z in data.measurements]
+    # only the tree's edges are composed: converting every measurement cost ~0.2 s on w10000 at 50 % false loops
+    meas = {e: to_pose(dim, data.measurements[e]) for e in parent_edge if e >= 0}
     identity = gtsam.Pose2() if dim == 2 else gtsam.Pose3()
     for k, p in zip(anchors.tolist(), anchor_poses):
         poses[k] = identity if np.isnan(p).any() else to_pose(dim, p)

@@ -130,11 +130,39 @@ class SolverScope:
         self._cheap: list[tuple[int, np.ndarray]] = []    # (key width, sorted pair codes) estimated under the limit
         self._dear: list[tuple[int, np.ndarray]] = []     # ... and above it
         self.iterative_calls = 0
-        # the whole graph under the limit: every call direct, no estimate per call. Else its estimate is remembered
-        # like any other: a later call on the same edges (the candidates, when every loop is supported) is settled
-        # by it (w10000 at 50 % random-grouped: 2.4 s an elimination)
-        self.all_direct = not np.isfinite(self.limit) or not self._estimate(
-            np.asarray(pairs() if callable(pairs) else pairs))
+        # the whole graph under the limit: every call direct, no estimate per call. Estimated on first need
+        # (`all_direct`), unless a `narrow` block's subgraph, estimated first and above the limit, settles it: the
+        # whole graph is then above too (w10000 at 50 % random: 1.6e12 estimated flops, 1-2 s of symbolic
+        # elimination, the candidates' 3e11 settle it in a third of that). Once made, the whole graph's estimate is
+        # remembered like any other: a later call on the same edges (the candidates, when every loop is supported)
+        # is settled by it (w10000 at 50 % random-grouped: 2.4 s an elimination)
+        self._pairs = pairs
+        self._all_direct: bool | None = True if not np.isfinite(self.limit) else None
+
+    @property
+    def all_direct(self) -> bool:
+        """Whether the whole graph is estimated under the limit (every call direct)."""
+        if self._all_direct is None:
+            self._all_direct = not self._estimate(self._whole())
+            self._pairs = None
+        return self._all_direct
+
+    def narrow_dear(self, pairs: Callable[[], np.ndarray]) -> bool | None:
+        """For `narrow`: None when the whole graph is under the limit (every call direct), else whether the subgraph
+        `pairs()` is above it. While the whole graph is not estimated yet a proper subgraph goes first, and one above
+        the limit settles the whole graph as above too (fill-in only grows with edges)."""
+        if self._all_direct is None:
+            sub = np.asarray(pairs())
+            if len(sub) < len(self._whole()) and self._estimate(sub):
+                self._all_direct = False
+                return True
+            return None if self.all_direct else self._estimate(sub)
+        return None if self._all_direct else self._estimate(np.asarray(pairs()))
+
+    def _whole(self) -> np.ndarray:
+        if callable(self._pairs):
+            self._pairs = np.asarray(self._pairs())
+        return self._pairs
 
     def iterative(self, graph: gtsam.NonlinearFactorGraph) -> bool:
         """Whether an LM call on `graph` should use PCG."""
@@ -191,10 +219,22 @@ def narrow(pairs: Callable[[], np.ndarray]) -> Iterator[None]:
     loops are all outside its candidates: city10000 at 50 % random). No-op outside a scope or when the scope is
     all direct; `pairs` is only called when needed."""
     outer = _SCOPE.get()
-    if outer is None or outer.all_direct:
+    dear = outer.narrow_dear(pairs) if isinstance(outer, SolverScope) else None
+    if dear is None:
         yield
         return
-    token = _SCOPE.set(_DIRECT if not outer._estimate(np.asarray(pairs())) else outer)
+    token = _SCOPE.set(_DIRECT if not dear else outer)
+    try:
+        yield
+    finally:
+        _SCOPE.reset(token)
+
+
+@contextmanager
+def direct() -> Iterator[None]:
+    """Inside the block every LM call is direct: for graphs known to be small (a reduced problem of a few hundred
+    poses, graph.reduced), which need no estimate and must not take a place among the scope's remembered edge sets."""
+    token = _SCOPE.set(_DIRECT)
     try:
         yield
     finally:

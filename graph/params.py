@@ -233,6 +233,19 @@ class RobustParams(Config):
                                        "(a lone true loop under drift fits only once the map moves to it); more are "
                                        "only tested at the solution: long-range loops in every inner solve cost "
                                        "minutes on 10^4-node graphs")
+    readmit_isam2_steps: bool = setting(
+        True, unit="flag",
+        doc="on planar graphs, the GNC of the re-admission (graph.readmit: the kept loops known inliers, at most "
+            "`readmit_max_loops` candidates re-weighted) takes its steps by iSAM2 as `consensus_isam2_steps` does "
+            "(w10000 at 50 % random: 12 steps, ~0.65 s each by LM under load, ~0.3 s by iSAM2); 3D graphs keep "
+            "LM (iSAM2 over Pose3 re-linearises more: sphere2500 was slower); docs/graph.md")
+    trial_forecast: bool = setting(
+        True, unit="flag",
+        doc="before the joint trial, run its GNC over the tried loops on the Gaussian marginal of the solved map on "
+            "their end poses (graph.reduced: one partial elimination, then a GNC on a few hundred poses); when it "
+            "keeps none of them the whole-graph trial (a GNC of ~13 whole-graph solves) is not run. The kept loops "
+            "are held in that forecast, so a trial that would only push kept loops out is not run either "
+            "(docs/graph.md)")
     trial_map_covariance: bool = setting(
         False, unit="flag",
         doc="before the joint trial, judge each unsupported loop by its squared Mahalanobis distance with the marginal "

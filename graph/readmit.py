@@ -117,6 +117,7 @@ def _readmit_starts(built, values: gtsam.Values, inlier: np.ndarray, cand: np.nd
     best = None
     iters = 0
     for name in ("descent", "gnc"):
+        solved = False     # `v` already solved on exactly `trial`'s loops
         if name == "descent":
             # all candidates back at once, then the misfits leave (at most `readmit_rounds` solves)
             trial, v = inlier | cand, values
@@ -125,6 +126,7 @@ def _readmit_starts(built, values: gtsam.Values, inlier: np.ndarray, cand: np.nd
                 iters += it
                 new = inlier | (cand & (built.r2(v) <= c2))
                 if np.array_equal(new, trial):
+                    solved = True
                     break
                 trial = new
         else:
@@ -134,8 +136,11 @@ def _readmit_starts(built, values: gtsam.Values, inlier: np.ndarray, cand: np.nd
         added = trial & ~inlier
         if not added.any():
             continue
-        v, it = solve(built.graph(trial), v, params.solver.lm_max_iterations)
-        iters += it
+        if not solved:
+            # (the descent's last solve was on these loops already: a second one from its solution is LM's
+            # tolerance again, ~one whole-graph iteration on w10000)
+            v, it = solve(built.graph(trial), v, params.solver.lm_max_iterations)
+            iters += it
         f = objective(v)
         if bool(np.all(built.r2(v)[added] <= c2[added])) and (best is None or f < best[0]):
             best = (f, v, trial)

@@ -72,3 +72,22 @@ def test_capped_fill_cost_is_exact_below_its_cap_and_above_it_once_passed():
         low = full / 1000
         capped = fill_cost(pairs, 2, cap=low)
         assert low < capped <= full                               # stopped once past the cap: a lower bound
+
+
+def test_the_scope_verdict_is_the_whole_graphs_whether_a_subgraph_is_estimated_first_or_not():
+    from graph.linear import narrow, solver_scope
+
+    data, _ = _long_range(extra=120)
+    a, b = data.edge_index_pairs()
+    pairs = np.column_stack([a, b])
+    sub = pairs[:-60]
+    whole_cost, sub_cost = fill_cost(pairs, 2), fill_cost(sub, 2)
+    assert sub_cost < whole_cost
+    for limit in (0.5 * sub_cost, 0.5 * (sub_cost + whole_cost), 2.0 * whole_cost):
+        params = GraphParams().replace(solver={"direct_max_cost": limit})
+        with solver_scope(pairs, 2, params) as scope:
+            with narrow(lambda: sub):
+                pass
+            assert scope.all_direct == (whole_cost <= limit)
+        with solver_scope(pairs, 2, params) as scope:
+            assert scope.all_direct == (whole_cost <= limit)
