@@ -51,6 +51,7 @@ from graph.polish import polish
 from graph.readmit import readmit_dropped, readmit_supported
 from graph.result import GraphResult
 from graph.short_span import own_cycle_veto
+from graph.snooping import snoop
 from graph.support import CycleSupport, clusters, cycle_support, revisits
 from graph.thresholds import loop_thresholds, short_span, tail_margin
 from graph.tls import admit_fitting, gnc_tls, tls_objective
@@ -539,6 +540,11 @@ def _robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         iters += it
     if params.robust.own_cycle_test and cs.scale != 1.0:
         values, inlier, it = _own_cycle_test(cs, values, inlier, c2)
+        iters += it
+    if params.robust.data_snooping and cs.scale != 1.0:
+        # the kept loops against the family-wise bound where the graph's residuals follow the calibrated model
+        # (graph.snooping)
+        values, inlier, it = snoop(cs, values, inlier)
         iters += it
     t_polish = time.perf_counter()
     # 5. the loop set is decided: converge the map on it (graph.polish; LM stopped at its cost tolerance)
