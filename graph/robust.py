@@ -20,6 +20,8 @@
    margin on the map re-solved without them, where a false loop that bent its few steps of odometry no longer fits.
    Then the own-cycle test (graph.short_span): a kept loop between nodes a few steps apart whose cycle with the
    odometry between its ends is worse than the agreeing cycles of the kept loops is dropped.
+   Then, with `data_snooping` (off by default), the kept loops beyond the family-wise bound of their studentized
+   residuals where the kept loops follow the calibrated model (graph.snooping).
 5. once the loop set is decided, Gauss-Newton steps on the kept loops until the map stops moving (graph.polish):
    LM's cost tolerance stops far from the optimum on a flat objective (w10000: 0.56 m).
 
