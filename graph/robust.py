@@ -20,6 +20,8 @@
    margin on the map re-solved without them, where a false loop that bent its few steps of odometry no longer fits.
    Then the own-cycle test (graph.short_span): a kept loop between nodes a few steps apart whose cycle with the
    odometry between its ends is worse than the agreeing cycles of the kept loops is dropped.
+   Then, with `data_snooping` (off by default), the kept loops beyond the family-wise bound of their studentized
+   residuals where the kept loops follow the calibrated model (graph.snooping).
 5. once the loop set is decided, Gauss-Newton steps on the kept loops until the map stops moving (graph.polish):
    LM's cost tolerance stops far from the optimum on a flat objective (w10000: 0.56 m).
 
@@ -52,6 +54,7 @@ from graph.readmit import readmit_dropped, readmit_supported
 from graph.reduced import reduced_gnc
 from graph.result import GraphResult
 from graph.short_span import own_cycle_veto
+from graph.snooping import snoop
 from graph.support import CycleSupport, clusters, cycle_support, revisits
 from graph.thresholds import loop_thresholds, short_span, tail_margin
 from graph.tls import admit_fitting, gnc_tls, tls_objective
@@ -557,6 +560,11 @@ def _robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
         iters += it
     if params.robust.own_cycle_test and cs.scale != 1.0:
         values, inlier, it = _own_cycle_test(cs, values, inlier, c2)
+        iters += it
+    if params.robust.data_snooping and cs.scale != 1.0:
+        # the kept loops against the family-wise bound where the graph's residuals follow the calibrated model
+        # (graph.snooping)
+        values, inlier, it = snoop(cs, values, inlier)
         iters += it
     t_polish = time.perf_counter()
     # 5. the loop set is decided: converge the map on it (graph.polish; LM stopped at its cost tolerance)

@@ -73,6 +73,13 @@ def ours_short_screen(on: bool):
     return run
 
 
+def ours_snoop(on: bool):
+    """Ours with `robust.data_snooping` set either way (graph.snooping; side by side in one run)."""
+    def run(data: PoseGraphData) -> MethodRun:
+        return ours(data, GraphParams().replace(robust={"data_snooping": on}))
+    return run
+
+
 def ours_trial_map(on: bool):
     """Ours with `robust.trial_map_covariance` set either way (the default's other side, side by side in one run)."""
     def run(data: PoseGraphData) -> MethodRun:
@@ -130,6 +137,7 @@ def g2o_dcs(data: PoseGraphData, phi: float = DCS_PHI) -> MethodRun:
 METHODS = {"ours": ours, "ours-isam2": ours_isam2, "ours-tail-off": ours_tail(False), "ours-tail-on": ours_tail(True),
            "ours-own-off": ours_own_cycle(False),
            "ours-screen-on": ours_short_screen(True), "ours-screen-off": ours_short_screen(False), "ours-trial-map-on": ours_trial_map(True),
+           "ours-snoop-on": ours_snoop(True), "ours-snoop-off": ours_snoop(False),
            "gtsam-gnc": gtsam_gnc, "dcs": dcs, "g2o-dcs": g2o_dcs, "plain-lm": plain_lm}
 # peers run on contaminated graphs only up to --peer-max-nodes (minutes per row beyond)
 PEERS_LIMITED = ("gtsam-gnc", "plain-lm", "g2o-dcs")
