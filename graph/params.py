@@ -287,6 +287,12 @@ class RobustParams(Config):
                                                  "still fit there are passed (graph.robust; a cost bound, false: "
                                                  "every cluster screened on its own)")
     odometry_start: bool = setting(True, doc="also run GNC from the odometry chain; keep the lower TLS objective")
+    odometry_start_short_skip: bool = setting(
+        True, doc="skip the GNC from the odometry chain (and so the DCS-kernel start) when every candidate the GNC from "
+                  "the supported start rejected is short-span (graph.thresholds.short_span): the odometry start exists "
+                  "for a false group that bent the supported start and the long loops it strains, truncated there; "
+                  "with every long-range candidate kept none was strained (city10000 at 50 % local-grouped, seed 2: "
+                  "17 GNC steps, 21 s of 167 s, to the same loops and TLS objective)")
     cluster_weights: bool = setting(False, doc="one GNC weight per cluster of agreeing loops instead of per loop")
     kernel_start: bool = setting(True, doc="when some supported loop does not fit at the supported start, also start "
                                            "from a DCS-kernel solve from the odometry chain followed by TLS descent "
@@ -310,6 +316,17 @@ class RobustParams(Config):
                   "start when every confident cluster keeps loops there, else one more beside the GNC starts (the "
                   "lowest TLS objective wins). Thousands of chance-supported random false loops bent every GNC "
                   "start on w10000 at 50 % (38.9 m from the clean optimum)")
+    confident_misfit_max_share: float = setting(
+        0.01, range="[0, 1]", unit="share of the confident clusters",
+        doc="where a solve over every candidate stays direct (no `cluster_start`), the confident start is skipped "
+            "when more than this share of the confident clusters misfit whole at the map of the confident loops "
+            "(no loop of the cluster within its threshold): consistent false groups among the confident loops bent "
+            "that map, so it cannot stand alone and the GNC starts decide, as on the costly path. Its TLS descent "
+            "creeps there (city10000 at 50 % local-grouped, seed 2: 10 re-solves, 118 s of 167 s, TLS objective "
+            "26163 against the supported start's 23295, which won). A map of true revisits misfits a stray cluster "
+            "or two (city10000 at 50 % local: 0 and 2 of ~1130, 0.002), a bent one hundreds (city10000 "
+            "local-grouped 0.33, w10000 local / local-grouped 0.11-0.14; seeds 1 and 2); the value is the one "
+            "`core_alone_max_split` uses for the same question; 1: never skipped")
     cluster_start: bool = setting(
         True, doc="when the confident start does not stand alone and a solve over every candidate loop would need "
                   "the iterative solver (its direct factorisation estimated above `solver.direct_max_cost`), decide "

@@ -222,8 +222,18 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
         _costly_starts(cs, c2, best)
     else:
         conf_first = confident_first(cs, c2)
-        if conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best,
-                                                         descent=True)):
+        share = _whole_misfit_share(cs, c2) if conf_first else 0.0
+        if share > cs.params.robust.confident_misfit_max_share:
+            # as on the costly path: many confident clusters misfit whole at the confident map, so groups of
+            # consistent false loops among the confident ones bent it; that start cannot stand alone, and its
+            # descent creeps (city10000 at 50 % local-grouped: 10 re-solves, 118 s of 167 s, and the supported
+            # start won by the TLS objective, 23295 against 26163)
+            cs.notes.append(f"confident start skipped: {share:.3g} of the confident clusters misfit whole at the "
+                            "confident map")
+            cs.ready()
+            _gnc_starts(cs, c2, best, confident_after=False)
+        elif conf_first and confident_holds(cs, _run_start(cs, c2, "confident loops", cs.confident[1](), best,
+                                                           descent=True)):
             cs.notes.append("GNC starts skipped: every confident cluster keeps loops at the confident start")
         else:
             cs.ready()
@@ -233,6 +243,18 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
         # won for one that lost (manhattan random-grouped 30 %, seed 3: 0.8 -> 24 m without it)
         _run_start(cs, c2, "previous decision", extra, best, descent=True)
     return best
+
+
+def _whole_misfit_share(cs: ConsensusProblem, c2: np.ndarray) -> float:
+    """Share of the confident clusters none of whose loops fits its threshold at the map of the confident loops
+    (`confident_whole` asks whether it is zero)."""
+    label = cs.confident[0]
+    conf = label >= 0
+    fit = cs.built.subset(conf).r2(cs.confident[1]()) <= c2[conf]
+    n = int(label.max()) + 1
+    present = np.bincount(label[conf], minlength=n) > 0
+    hit = np.bincount(label[conf], weights=fit.astype(float), minlength=n) > 0
+    return float(np.sum(present & ~hit)) / max(int(present.sum()), 1)
 
 
 def _costly_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best) -> None:
@@ -292,6 +314,16 @@ def _gnc_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best, confident_aft
     # happened; the second start (the slowest solve: drift makes its GNC start near-convex) is skipped.
     # (A weaker sign, a cluster of agreeing loops split by the solution, misses ring random-grouped.)
     first = best.inlier
+    if robust.odometry_start_short_skip and first is not None and not _long_rejected(cs, first):
+        # the failure that start exists for truncates the loops a bent map strains, and a bend is map-scale: over a
+        # short span the odometry and the loops nearby fix the relative pose (graph.thresholds.short_span). When
+        # every candidate the supported start rejected is short-span, every long-range candidate is kept and none
+        # was strained (city10000 at 50 % local-grouped: 17 GNC steps from the odometry chain, 21 s of 167 s, to
+        # the same loops and TLS objective)
+        cs.notes.append("odometry start skipped: every candidate the supported start rejected is short-span")
+        if cs.confident is not None and confident_after:
+            _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True)
+        return
     agree = first is not None and np.array_equal(first, _run_start(cs, c2, "odometry", cs.odometry_values, best))
     if robust.kernel_start and (robust.kernel_start_always or not agree):
         # groups of consistent false loops spread over the map bend GNC's convex surrogate itself, from either
@@ -306,6 +338,14 @@ def _gnc_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best, confident_aft
         cs.notes.append("DCS-kernel start skipped: both GNC starts kept the same loops")
     if cs.confident is not None and confident_after:
         _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True)
+
+
+def _long_rejected(cs: ConsensusProblem, inlier: np.ndarray) -> bool:
+    """Whether some candidate rejected in `inlier` spans more than the short span (graph.thresholds.short_span)."""
+    a, b = cs.data.edge_index_pairs()
+    idx = cs.built.loop_idx
+    short = short_span(np.abs(a[idx] - b[idx]), cs.params.robust.support_window)
+    return bool(np.any(cs.cand & ~inlier & ~short))
 
 
 def _try_unsupported(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray
