@@ -261,6 +261,12 @@ class RobustParams(Config):
             "`readmit_max_loops` candidates re-weighted) takes its steps by iSAM2 as `consensus_isam2_steps` does "
             "(w10000 at 50 % random: 12 steps, ~0.65 s each by LM under load, ~0.3 s by iSAM2); 3D graphs keep "
             "LM (iSAM2 over Pose3 re-linearises more: sphere2500 was slower); docs/graph.md")
+    readmit_isam2_gauss_newton: bool = setting(
+        True, unit="flag",
+        doc="`readmit_isam2_steps` by Gauss-Newton (full back-substitution) instead of Powell's dogleg: the kept "
+            "loops are fixed and only the candidates re-weighted, and dogleg's step evaluates the whole graph's "
+            "error (~0.2 s of a ~0.3 s step on w10000); the consensus GNC keeps dogleg (Gauss-Newton steps took "
+            "ring at 50 % random-grouped to other labels there); docs/graph.md")
     trial_forecast: bool = setting(
         True, unit="flag",
         doc="before the joint trial, run its GNC over the tried loops on the Gaussian marginal of the solved map on "

@@ -424,13 +424,16 @@ def _readmit_agreeing(cs: ConsensusProblem, values: gtsam.Values, inlier: np.nda
 
     # its steps re-weight at most `readmit_max_loops` candidates against a fixed map: iSAM2's case (graph.tls)
     judge_params = cs.params
+    gauss_newton = False
     if p.readmit_isam2_steps and cs.data.dim == 2:
         judge_params = cs.params.replace(robust={"consensus_isam2_steps": True})
+        gauss_newton = p.readmit_isam2_gauss_newton
 
     def judge(mask: np.ndarray, v0: gtsam.Values):
         # GNC over the candidates only; odometry, anchor and the kept loops are known inliers
         known = cs.base + [f for f, k in zip(built.loops, inlier.tolist()) if k]
-        v, ok, _, n = gnc_tls(known, built.subset(mask), v0, c2[mask], np.arange(int(mask.sum())), judge_params)
+        v, ok, _, n = gnc_tls(known, built.subset(mask), v0, c2[mask], np.arange(int(mask.sum())), judge_params,
+                               gauss_newton, final_solve=False)
         out = np.zeros(cs.loops, bool)
         out[np.flatnonzero(mask)[ok]] = True
         return v, out, n

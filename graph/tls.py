@@ -49,11 +49,18 @@ class _IsamSteps:
     """Warm GNC steps by iSAM2 (`consensus_isam2_steps`): the graph is held once; a step removes and re-adds only
     the loops whose weight changed and re-factors the cliques they and the moved poses touch."""
 
-    def __init__(self, base: list, loops: list, values: gtsam.Values, relinearize: float):
+    def __init__(self, base: list, loops: list, values: gtsam.Values, relinearize: float,
+                 gauss_newton: bool = False):
         p = gtsam.ISAM2Params()
-        # Powell's dogleg, not Gauss-Newton: the LM steps it stands for are damped, and undamped steps took ring at
-        # 50 % random-grouped to other labels (60 % of the false loops rejected, 43.9 m)
-        p.setOptimizationParams(gtsam.ISAM2DoglegParams())
+        if gauss_newton:
+            # undamped, with the whole back-substitution (wildfire 0: no stale part of the step): where only a few
+            # candidates are re-weighted against a fixed map (`readmit_isam2_gauss_newton`); dogleg's step
+            # evaluates the whole graph's error, ~0.2 s of a ~0.3 s step on w10000
+            p.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(0.0))
+        else:
+            # Powell's dogleg, not Gauss-Newton: the LM steps it stands for are damped, and undamped steps took ring
+            # at 50 % random-grouped to other labels (60 % of the false loops rejected, 43.9 m)
+            p.setOptimizationParams(gtsam.ISAM2DoglegParams())
         # a between factor's error is linear in the poses' translations once their rotations are fixed (2D and 3D,
         # gtsam's exponential charts), so only a rotation update calls for a new linearisation: a GNC step shifts
         # the whole map by centimetres, and a translation threshold re-factored every pose every step
@@ -94,9 +101,14 @@ class _IsamSteps:
 
 
 def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, label: np.ndarray,
-            params: GraphParams) -> tuple[gtsam.Values, np.ndarray, int, int]:
+            params: GraphParams, isam2_gauss_newton: bool = False, final_solve: bool = True
+            ) -> tuple[gtsam.Values, np.ndarray, int, int]:
     """GNC-TLS over the loops of `sub` from `values` with one weight per label (cluster); returns (values,
-    inlier per loop, outer steps, LM iterations). Odometry + anchor (`base`) are known inliers."""
+    inlier per loop, outer steps, LM iterations). Odometry + anchor (`base`) are known inliers.
+    `isam2_gauss_newton`: iSAM2 steps (`consensus_isam2_steps`) by Gauss-Newton instead of dogleg.
+    `final_solve` False: the caller solves the returned labels to convergence itself (or discards the map), so the
+    GNC ends at the step whose weights no longer change without solving it, and without the warm LM step after
+    iSAM2 steps; the labels are the same, the map is the last step's."""
     loops = sub.loops
     L = len(loops)
     n_cl = int(label.max()) + 1 if L else 0
@@ -124,6 +136,12 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
                 # binary weights that still change: the surrogate is TLS itself from here on, and a few warm
                 # iterations per step only creep towards the next labels (a label-flip tail of 40+ steps)
                 inner = params.solver.lm_max_iterations
+            if (not final_solve and outer > 1 and bool(np.all((new_w < tol) | (new_w > 1 - tol)))
+                    and float(np.max(np.abs(new_w - weights))) < tol):
+                # the last step (binary weights, no change): its solve would only move the map the caller re-solves
+                weights = new_w
+                polish = False
+                break
             changed = int(np.count_nonzero(new_w[label] != weights[label]))
             # a fresh iSAM2 costs one batch factorisation and, at the end, one LM polish: not for a step that
             # changes no weight (the last step of a run after a step solved to convergence)
@@ -131,7 +149,8 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
                    and changed <= params.robust.consensus_isam2_max_changed and (isam is not None or changed > 0))
             if few:
                 if isam is None:
-                    isam = _IsamSteps(base, loops, values, params.robust.consensus_isam2_relinearize)
+                    isam = _IsamSteps(base, loops, values, params.robust.consensus_isam2_relinearize,
+                                       isam2_gauss_newton)
                 values = isam.step(new_w[label], params.robust.consensus_isam2_updates)
                 iters += params.robust.consensus_isam2_updates
                 polish = True
@@ -149,7 +168,7 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
             if bool(np.all((weights < tol) | (weights > 1 - tol))) and change < tol:
                 break
             mu *= params.robust.consensus_mu_step
-        if polish:
+        if polish and final_solve:
             # iSAM2's estimate is a few partial Gauss-Newton steps: the warm LM step the LM path ends on, from it
             values, it = solve_lm(weighted_graph(base, loops, weights[label]), values, params,
                                   params.robust.consensus_inner_iterations)
