@@ -63,8 +63,9 @@ def readmit_supported(built, values: gtsam.Values, inlier: np.ndarray, pair_a: n
     """(values, inlier, LM iterations) after one joint re-solve with the rejected loops that agree with a kept loop
     over a short cycle (`pair_a`, `pair_b`: the support pairs of graph.support), judged by `judge(mask, values)`
     -> (values, kept mask over all loops, iterations): the caller's GNC-TLS over the candidates with the kept loops
-    as known inliers (its map need not be solved on its labels: a set that adds loops is re-solved here), and, as a second start, all candidates back by LM then a TLS descent (misfits leave,
-    re-solve, at most `readmit_rounds` solves); the set with the lower TLS objective whose added loops all fit
+    as known inliers (its map need not be solved on its labels: a set that adds loops is re-solved here), and, as
+    a second start, all candidates back by LM then a TLS descent (misfits leave, re-solve, at most
+    `readmit_rounds` solves); the set with the lower TLS objective whose added loops all fit
     is kept when that objective is below the one without them. Each start fails where the other works: the
     descent lost intel's loop 669 among 7 false candidates (local 30 %, seed 2; they bent the map for it), the
     GNC rejected loops 667 and 669 that fit only together (random 30 %, seed 1).
