@@ -45,6 +45,23 @@ def scalar_factor(cycles: CycleSupport, dof: int) -> float:
     return float(np.median(cycles.r2)) / float(chi2.ppf(0.5, dof))
 
 
+def refined_factor(cycles: CycleSupport, dof: int, bound: float, rounds: int) -> float:
+    """`scalar_factor`, then re-estimated from the cycles with r^2 <= `bound` x the factor (those that agree on the
+    calibrated model, not only on the stated one) until it moves by < 1 % or after `rounds` rounds. The median is
+    robust to a minority of cycles through false loops, not to the near-half a loosely stated graph lets agree."""
+    s0 = scalar_factor(cycles, dof)
+    for _ in range(rounds):
+        r2 = cycles.r2[cycles.r2 <= bound * s0]
+        if not len(r2):
+            break
+        s1 = float(np.median(r2)) / float(chi2.ppf(0.5, dof))
+        done = abs(s1 - s0) <= 0.01 * s0
+        s0 = s1
+        if done:
+            break
+    return s0
+
+
 def _quadratic_parts(e: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per cycle: the terms of e^T D^-1 S^-1 D^-1 e with D = diag(sqrt(s_t) I, sqrt(s_r) I) as
     a / s_t + 2 b / sqrt(s_t s_r) + c / s_r, and the rotation part's own squared error e_r^T S_rr^-1 e_r."""

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from graph.batch import BuiltGraph, build, initial_guess, resolve_init, solve_lm
-from graph.calibration import VarianceFactors, scalar_factor, scale_information, split_factors
+from graph.calibration import VarianceFactors, refined_factor, scale_information, split_factors
 from graph.cluster_start import cluster_starts
 from graph.confident import confident_first, confident_holds, confident_start, confident_whole
 from graph.factors import array_from_values, graph_of, values_from_array
@@ -165,7 +165,8 @@ def _prepare(data: PoseGraphData, params: GraphParams) -> tuple[ConsensusProblem
     elif calibrate:
         # variance factor from the agreeing cycles: their median error over the chi-square median. Local, so
         # neither drift nor a false loop bending the map (both inflate a global a-posteriori estimate) enter it
-        cs.sigma0 = scalar_factor(cycles, dof)
+        cs.sigma0 = refined_factor(cycles, dof, float(chi2.ppf(params.robust.support_probability, dof))
+                                   * params.robust.calibration_margin, params.robust.calibration_refine)
         cs.scale = params.robust.calibration_margin * cs.sigma0
         notes.append(f"variance factor {cs.sigma0:.3g}: thresholds x {cs.scale:.3g}")
     cs.confident = confident_start(cs, supported)

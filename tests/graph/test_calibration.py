@@ -5,8 +5,8 @@ import pytest
 from scipy.stats import chi2
 
 from graph import GraphParams, optimize
-from graph.calibration import VarianceFactors, scale_information, split_factors
-from graph.support import cycle_support
+from graph.calibration import VarianceFactors, refined_factor, scalar_factor, scale_information, split_factors
+from graph.support import CycleSupport, cycle_support
 from tests.graph.synth import noisy_graph, square_laps
 from tests.graph.synth3d import mis_stated_graph, position_rmse
 
@@ -88,3 +88,32 @@ def test_rotation_stated_far_too_loose_keeps_every_true_loop():
     res = optimize(data, GraphParams())
     assert res.loop_inlier[~false].all()
     assert not res.loop_inlier[false].any()
+
+
+def _cycle_set(r2: np.ndarray) -> CycleSupport:
+    n = len(r2)
+    return CycleSupport(np.arange(n), np.arange(n) + 1, r2, np.zeros((n, 3)), np.zeros((n, 3, 3)))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_refined_factor_sheds_the_cycles_that_agree_only_on_loosely_stated_noise(seed):
+    # a graph stating its noise 500x too loose (factor 0.002): 55 % of the agreeing cycles are true ones, 45 % close
+    # through false loops, still within the stated chi-square bound but 30-400x the true noise
+    rng = np.random.default_rng(seed)
+    s = 0.002
+    true = s * rng.chisquare(3, 5500)
+    false = s * rng.chisquare(3, 4500) * rng.uniform(30, 400, 4500)
+    cycles = _cycle_set(rng.permutation(np.r_[true, false]))
+    bound = float(chi2.ppf(0.99, 3)) * 10
+    plain = scalar_factor(cycles, 3)
+    refined = refined_factor(cycles, 3, bound, 5)
+    assert plain > 2 * s                        # the median is carried off by the false cycles
+    assert 1 / 1.3 < refined / s < 1.3
+    assert refined_factor(cycles, 3, bound, 0) == plain
+
+
+def test_refined_factor_leaves_a_clean_set_alone():
+    rng = np.random.default_rng(4)
+    cycles = _cycle_set(0.05 * rng.chisquare(3, 3000))
+    bound = float(chi2.ppf(0.99, 3)) * 10
+    assert abs(refined_factor(cycles, 3, bound, 5) / scalar_factor(cycles, 3) - 1) < 0.01

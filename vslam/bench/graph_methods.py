@@ -87,6 +87,13 @@ def ours_trial_map(on: bool):
     return run
 
 
+def ours_setting(**robust):
+    """Ours with the given `robust` settings (a setting's other side, side by side with `ours` in one run)."""
+    def run(data: PoseGraphData) -> MethodRun:
+        return ours(data, GraphParams().replace(robust=robust))
+    return run
+
+
 def plain_lm(data: PoseGraphData) -> MethodRun:
     t0 = time.perf_counter()
     res = optimize(data, GraphParams.preset("least_squares"))
@@ -138,6 +145,7 @@ METHODS = {"ours": ours, "ours-isam2": ours_isam2, "ours-tail-off": ours_tail(Fa
            "ours-own-off": ours_own_cycle(False),
            "ours-screen-on": ours_short_screen(True), "ours-screen-off": ours_short_screen(False), "ours-trial-map-on": ours_trial_map(True),
            "ours-snoop-on": ours_snoop(True), "ours-snoop-off": ours_snoop(False),
+           "ours-refine-on": ours_setting(calibration_refine=5), "ours-refine-off": ours_setting(calibration_refine=0),
            "gtsam-gnc": gtsam_gnc, "dcs": dcs, "g2o-dcs": g2o_dcs, "plain-lm": plain_lm}
 # peers run on contaminated graphs only up to --peer-max-nodes (minutes per row beyond)
 PEERS_LIMITED = ("gtsam-gnc", "plain-lm", "g2o-dcs")
