@@ -184,13 +184,13 @@ class RobustParams(Config):
     calibration_min_loops: int = setting(10, range="[1, inf)", unit="cycles",
                                          doc="calibrate only with at least this many agreeing cycles")
     calibration_refine: int = setting(
-        0, range="[0, inf)", unit="rounds",
+        5, range="[0, inf)", unit="rounds",
         doc="planar graphs: re-estimate the variance factor from the agreeing cycles that also agree on the "
             "calibrated model (cycle r^2 <= chi-square(support_probability) x calibration_margin x the factor), "
             "until it changes by < 1 % or this many rounds: the support test runs on the stated information, which "
             "on a graph stating its noise ~400x too loose lets short false loops agree with true ones (w10000 50 % "
             "local / local-grouped: 44-48 % of the agreeing pairs hold a false loop, factor 3.4-4.3x the clean "
-            "graph's); 0 = one estimate (graph.calibration.refined_factor)")
+            "graph's; it converges in 2-3 rounds, 5 is a cap); 0 = one estimate (graph.calibration.refined_factor)")
     reach_tail: bool = setting(False, unit="flag",
                                doc="after the decision, loops at most 2 x support_window steps apart (the span of the "
                                    "agreeing cycles, where no map strain excuses a misfit) are judged at "
