@@ -9,6 +9,7 @@ from scipy.stats import chi2
 
 from graph.batch import BuiltGraph, initial_guess, solve_lm
 from graph.factors import values_from_array
+from graph.kernel_start import tls_descent
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod, LoopWeighting
 from graph.support import revisits
@@ -121,4 +122,76 @@ def drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFac
             dropped += int(member.sum())
     if dropped:
         notes.append(f"group test: dropped {dropped} loops in clusters that lowered the TLS objective by leaving")
+    return values, inlier, iters
+
+
+def group_objective(base_graph: gtsam.NonlinearFactorGraph, built: BuiltGraph, values: gtsam.Values,
+                    c2: np.ndarray, groups: list[tuple[np.ndarray, float]]) -> float:
+    """The TLS objective (graph.tls.tls_objective) with each of `groups` (loop mask, group threshold) charged as one
+    hypothesis, min(sum r^2, c2g) / 2, instead of loop by loop: the model the group test decides by."""
+    r = built.r2(values)
+    f = tls_objective(base_graph, built, values, c2)
+    for member, c2g in groups:
+        f += 0.5 * (min(float(r[member].sum()), c2g) - float(np.minimum(r[member], c2[member]).sum()))
+    return f
+
+
+def retry_rejected(data: PoseGraphData, built: BuiltGraph, base_graph: gtsam.NonlinearFactorGraph,
+                   values: gtsam.Values, inlier: np.ndarray, cand: np.ndarray, c2: np.ndarray, scale: float,
+                   params: GraphParams, notes: list[str]) -> tuple[gtsam.Values, np.ndarray, int]:
+    """Re-try the supported revisit clusters (graph.support.revisits over `cand`) rejected whole: each of the
+    `retry_clusters` nearest their thresholds (summed r^2 over summed c2) goes back with every kept loop, LM from
+    the solution, then TLS descent over the kept loops and it (the misfits leave, re-solve); the new set stands
+    when the group-level objective (`group_objective`, the cluster and every kept cluster the descent dropped
+    charged as one hypothesis each) is lower than before.
+
+    The GNC starts decide every cluster at once from one map; when a bend elsewhere holds a true revisit off, GNC
+    truncates it and no later step offers it back whole (per-loop readmission sees each of its loops misfit at the
+    bent map). Charging the clusters at their group thresholds keeps the move consistent with the group test: a
+    false group it dropped does not come back because sixteen per-loop thresholds outweigh one bend. Cost: one LM
+    solve and a TLS descent per tried cluster; the order puts the thousands of false groups of a 10^4-node graph,
+    off by 10^3-10^4 times their thresholds, last."""
+    budget = params.robust.retry_clusters
+    out = cand & ~inlier
+    if budget <= 0 or not out.any():
+        return values, inlier, 0
+    window = params.robust.support_window
+    component = revisits(data, window, cand)
+    labels, counts = np.unique(component[cand], return_counts=True)
+    kept_labels = np.unique(component[cand & inlier])
+    whole = labels[(counts >= 2) & ~np.isin(labels, kept_labels)]
+    if not len(whole):
+        return values, inlier, 0
+    r2 = built.r2(values)
+    ratio = np.array([r2[component == g].sum() / c2[component == g].sum() for g in whole.tolist()])
+    order = whole[np.argsort(ratio, kind="stable")][:budget]
+    dof = TANGENT_DIM[data.dim]
+    prob = data.probability[built.loop_idx]
+    base = built.priors + built.odometry
+    iters = 0
+    added = 0
+    for g in order.tolist():
+        member = component == g
+        trial = inlier | member
+        v, it = solve_lm(built.graph(trial), values, params, params.solver.lm_max_iterations)
+        iters += it
+        v, kept, it = tls_descent(base, built.subset(trial), v, c2[trial], params, params.robust.kernel_descent_rounds)
+        iters += it
+        new = np.zeros_like(inlier)
+        new[np.flatnonzero(trial)[kept]] = True
+        if not (new & member).any():
+            continue
+        # the kept clusters the descent dropped loops from are judged as one hypothesis each, as in the group test
+        kept_component = revisits(data, window, inlier)
+        lost = inlier & ~new
+        groups = [member] + [kept_component == h for h in np.unique(kept_component[lost]).tolist()]
+        charged = [(m, group_threshold(prob[m], dof, scale, params)) for m in groups]
+        f0 = group_objective(base_graph, built, values, c2, charged)
+        f = group_objective(base_graph, built, v, c2, charged)
+        if f < f0:
+            notes.append(f"retry: a rejected cluster of {int(member.sum())} loops back with {int((new & member).sum())}"
+                         f" kept, {int(lost.sum())} kept loops out; objective {f0:.6g} -> {f:.6g}")
+            values, inlier = v, new
+            added += 1
+    notes.append(f"retry: {added} of {len(order)} tried clusters rejected whole kept ({len(whole)} such clusters)")
     return values, inlier, iters
