@@ -19,13 +19,21 @@ from graph.tls import tls_objective
 def group_threshold(probability: np.ndarray, dof: int, scale: float, params: GraphParams) -> float:
     """Truncation level of a cluster of n loops judged as one hypothesis: the chi-square quantile of its summed
     squared residuals (n x dof degrees of freedom), shifted by the log-odds of its mean loop probability (as a
-    single loop's, graph.thresholds), times the calibration scale of the loop thresholds."""
+    single loop's, graph.thresholds), times the calibration scale of the loop thresholds. With
+    `group_margin_once` (calibrated models only), the scale's heavy-tail margin (`calibration_margin`) is granted
+    once, on one loop's chi-square quantile, and the sum is held to the variance factor alone: the margin covers
+    one loop far in its tail (intel's true lone loops reach 12x chi-square), while n loops of one revisit are one
+    claim whose n x dof sum has no such tail of its own."""
     n = len(probability)
     c2 = float(chi2.ppf(params.robust.inlier_probability, n * dof))
     p = probability[np.isfinite(probability)]
     if len(p) and params.robust.loop_weighting == LoopWeighting.THRESHOLD:
         pc = float(np.clip(p.mean(), params.robust.probability_clip, 1.0 - params.robust.probability_clip))
         c2 = max(c2 + 2.0 * np.log(pc / (1.0 - pc)), 0.05 * c2)
+    if params.robust.group_margin_once and scale != 1.0:
+        # the heavy-tail margin once, for the worst loop of the claim; the rest at the chi-square of n x dof
+        unit = scale / params.robust.calibration_margin
+        return c2 * unit + (scale - unit) * float(chi2.ppf(params.robust.inlier_probability, dof))
     return c2 * scale
 
 

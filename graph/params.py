@@ -256,6 +256,12 @@ class RobustParams(Config):
                                       "random-grouped 30 %, seed 3: 16 true loops out, objective 4601.6 -> 4348.4 "
                                       "with them back). 0: off, the default until the table shows it pays "
                                       "(docs/graph.md)")
+    group_margin_once: bool = setting(False, doc="the group test's threshold (graph.groups.group_threshold) grants "
+                                                 "the heavy-tail margin (calibration_margin) once, on one loop's "
+                                                 "chi-square quantile, instead of on the whole n x dof quantile: a "
+                                                 "false group bending a stretch without true loop ends costs less "
+                                                 "than ten margins (ringCity random-grouped 30 %, seed 3: bend "
+                                                 "~21.7 against 41.5); false: the margin on the whole sum")
     group_joint_screen: bool = setting(True, doc="before the group test's one screen per cluster, one warm solve "
                                                  "with all the tested clusters left out: those whose loops all "
                                                  "still fit there are passed (graph.robust; a cost bound, false: "

@@ -50,3 +50,25 @@ def test_group_threshold_is_the_chi_square_of_its_total_dof():
     assert group_threshold(np.full(10, np.nan), 3, 2.0, p) == pytest.approx(2.0 * chi2.ppf(0.99, 30))
     # a likely group gets a looser test, as a single loop does, but once, not once per loop
     assert group_threshold(np.full(10, 0.9), 3, 1.0, p) == pytest.approx(chi2.ppf(0.99, 30) + 2 * np.log(9))
+
+
+@pytest.mark.parametrize("laps,side,every,seed,offset", [(2, 30, 4, 1, 0), (3, 30, 4, 0, 5)])
+def test_consistent_false_group_rejected_with_the_margin_once(laps, side, every, seed, offset):
+    data, truth, false, without = _grouped(laps, side, every, seed, offset)
+    p = GraphParams().replace(robust={"group_margin_once": True})
+    clean = robust_solve(without, p)
+    res = robust_solve(data, p)
+    assert not res.loop_inlier[false].any()
+    assert res.loop_inlier[~false].all()
+    assert ate(truth, res.poses) <= 1.01 * ate(truth, clean.poses) + 1e-3
+
+
+def test_group_threshold_with_the_margin_once_grants_one_loop_its_tail():
+    p = GraphParams().replace(robust={"group_margin_once": True})
+    m = p.robust.calibration_margin
+    sigma0 = 0.2
+    got = group_threshold(np.full(10, np.nan), 3, m * sigma0, p)
+    assert got == pytest.approx(sigma0 * chi2.ppf(0.99, 30) + (m - 1) * sigma0 * chi2.ppf(0.99, 3))
+    assert got < group_threshold(np.full(10, np.nan), 3, m * sigma0, GraphParams())
+    # uncalibrated (scale 1): no margin to grant, the plain chi-square of n x dof
+    assert group_threshold(np.full(10, np.nan), 3, 1.0, p) == pytest.approx(chi2.ppf(0.99, 30))
