@@ -261,10 +261,10 @@ class RobustParams(Config):
                                                  "chi-square quantile, instead of on the whole n x dof quantile: a "
                                                  "false group bending a stretch without true loop ends costs less "
                                                  "than ten margins (ringCity random-grouped 30 %, seed 3: bend "
-                                                 "~21.7 against 41.5, 10.7 with it). Off: under a systematic "
-                                                 "odometry bias a true revisit's residuals add up coherently and it "
-                                                 "drops true clusters (tests/graph/test_consensus.py, 0.02 rad per "
-                                                 "step: 65 of 99 true loops out; docs/graph.md)")
+                                                 "~21.7 against 41.5, 10.7 with it). Off: under a heading bias "
+                                                 "the odometry a true revisit strains relaxes by more than that "
+                                                 "without it (tests/graph/test_consensus.py, 0.02 rad per step: 65 "
+                                                 "of 99 true loops out; docs/graph.md)")
     group_joint_screen: bool = setting(True, doc="before the group test's one screen per cluster, one warm solve "
                                                  "with all the tested clusters left out: those whose loops all "
                                                  "still fit there are passed (graph.robust; a cost bound, false: "
