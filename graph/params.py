@@ -296,6 +296,25 @@ class RobustParams(Config):
                                    "(those nearest their thresholds first) and drop a cluster whose absence lowers "
                                    "the TLS objective: a group of consistent false loops the map bent to fits "
                                    "loop by loop (graph.robust); 0: off")
+    retry_clusters: int = setting(0, range="[0, inf)", unit="clusters",
+                                  doc="after the group test, re-try this many supported clusters rejected whole "
+                                      "(those nearest their thresholds first): all back, LM, TLS descent over the "
+                                      "kept loops and them; the new set stands when the group-level TLS objective "
+                                      "is lower (graph.groups.retry_rejected). A GNC start can end with a true "
+                                      "revisit out while a bend elsewhere holds its loops off (ringCity "
+                                      "random-grouped 30 %, seed 3: 16 true loops out, objective 4601.6 -> 4348.4 "
+                                      "with them back). 0: off, the default until the table shows it pays "
+                                      "(docs/graph.md)")
+    group_margin_once: bool = setting(True, doc="the group test's threshold (graph.groups.group_threshold) grants "
+                                                "the heavy-tail margin (calibration_margin) once, on one loop's "
+                                                "chi-square quantile, and holds the n x dof quantile to the larger "
+                                                "of the variance factor and the odometry's a-posteriori one at the "
+                                                "solution (never above the margin on the whole sum): a false group "
+                                                "bending a stretch without true loop ends costs less than ten "
+                                                "margins (ringCity random-grouped 30 %, seed 3: bend ~21.7 against "
+                                                "41.5, 10.7 with it), a true revisit straining biased odometry more "
+                                                "than one (tests/graph/test_consensus.py: odometry 34x the cycles' "
+                                                "factor). false: the margin on the whole sum (docs/graph.md)")
     group_joint_screen: bool = setting(True, doc="before the group test's one screen per cluster, one warm solve "
                                                  "with all the tested clusters left out: those whose loops all "
                                                  "still fit there are passed (graph.robust; a cost bound, false: "

@@ -44,7 +44,7 @@ from graph.calibration import VarianceFactors, refined_factor, scale_information
 from graph.cluster_start import cluster_starts
 from graph.confident import confident_first, confident_holds, confident_start, confident_whole
 from graph.factors import array_from_values, graph_of, values_from_array
-from graph.groups import drop_false_groups, group_threshold
+from graph.groups import drop_false_groups, group_threshold, retry_rejected
 from graph.kernel_start import dcs_solve, tls_descent
 from graph.linear import costly, narrow, solver_scope
 from graph.model import TANGENT_DIM, PoseGraphData
@@ -460,6 +460,9 @@ def decide(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None = No
         iters += it
         values, inlier, it = drop_false_groups(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale,
                                                cs.method, cs.params, cs.notes, cs.stated)
+    iters += it
+    values, inlier, it = retry_rejected(cs.data, cs.built, cs.base_graph, values, inlier, cs.cand, c2, cs.scale,
+                                        cs.params, cs.notes)
     iters += it
     values, inlier, it = admit_fitting(cs.built, values, inlier, c2, cs.params, cs.notes)
     iters += it

@@ -46,7 +46,35 @@ def test_revisit_clusters_join_a_group_split_by_the_cycle_test():
 
 
 def test_group_threshold_is_the_chi_square_of_its_total_dof():
-    p = GraphParams()
+    p = GraphParams().replace(robust={"group_margin_once": False})
     assert group_threshold(np.full(10, np.nan), 3, 2.0, p) == pytest.approx(2.0 * chi2.ppf(0.99, 30))
     # a likely group gets a looser test, as a single loop does, but once, not once per loop
     assert group_threshold(np.full(10, 0.9), 3, 1.0, p) == pytest.approx(chi2.ppf(0.99, 30) + 2 * np.log(9))
+
+
+@pytest.mark.parametrize("laps,side,every,seed,offset", [(2, 30, 4, 1, 0), (3, 30, 4, 0, 5)])
+def test_consistent_false_group_rejected_with_the_margin_on_the_whole_sum(laps, side, every, seed, offset):
+    data, truth, false, without = _grouped(laps, side, every, seed, offset)
+    p = GraphParams().replace(robust={"group_margin_once": False})
+    clean = robust_solve(without, p)
+    res = robust_solve(data, p)
+    assert not res.loop_inlier[false].any()
+    assert res.loop_inlier[~false].all()
+    assert ate(truth, res.poses) <= 1.01 * ate(truth, clean.poses) + 1e-3
+
+
+def test_group_threshold_with_the_margin_once_grants_one_loop_its_tail():
+    p = GraphParams()
+    assert p.robust.group_margin_once
+    m = p.robust.calibration_margin
+    sigma0 = 0.2
+    nan = np.full(10, np.nan)
+    got = group_threshold(nan, 3, m * sigma0, p)
+    assert got == pytest.approx(sigma0 * chi2.ppf(0.99, 30) + (m - 1) * sigma0 * chi2.ppf(0.99, 3))
+    whole = group_threshold(nan, 3, m * sigma0, GraphParams().replace(robust={"group_margin_once": False}))
+    assert got < whole
+    # odometry that disagrees with the map at the solution holds the sum to its own variance, at most the whole sum
+    assert got < group_threshold(nan, 3, m * sigma0, p, odometry_factor=2 * sigma0) < whole
+    assert group_threshold(nan, 3, m * sigma0, p, odometry_factor=100 * sigma0) == pytest.approx(whole)
+    # uncalibrated (scale 1): no margin to grant, the plain chi-square of n x dof
+    assert group_threshold(nan, 3, 1.0, p) == pytest.approx(chi2.ppf(0.99, 30))
