@@ -105,15 +105,27 @@ def confident_whole(cs, c2: np.ndarray) -> bool:
     """Whether every confident cluster has at least one loop that fits at the map of the confident loops (before
     any descent): a cluster that misfits whole there is one the descent from it would reject whole, so the
     confident start would not stand alone (`confident_holds`)."""
+    return whole_misfit_share(cs, c2) == 0.0
+
+
+def whole_misfit_share(cs, c2: np.ndarray) -> float:
+    """Share of the confident clusters none of whose loops fits its threshold at the map of the confident loops."""
     conf = cs.confident[0] >= 0
-    return _every_cluster_has(cs.confident[0], cs.built.subset(conf).r2(cs.confident[1]()) <= c2[conf])
+    missing, present = _clusters_without(cs.confident[0], cs.built.subset(conf).r2(cs.confident[1]()) <= c2[conf])
+    return missing / max(present, 1)
 
 
 def _every_cluster_has(label: np.ndarray, hit: np.ndarray) -> bool:
     """Whether every confident cluster (`label` per loop, -1: in none) has a loop with `hit` (one flag per loop of
     a cluster, in loop order)."""
+    return _clusters_without(label, hit)[0] == 0
+
+
+def _clusters_without(label: np.ndarray, hit: np.ndarray) -> tuple[int, int]:
+    """(confident clusters without a loop with `hit`, confident clusters) for `label` / `hit` as in
+    `_every_cluster_has`."""
     conf = label >= 0
     n = int(label.max()) + 1
     count = np.bincount(label[conf], weights=np.asarray(hit, float), minlength=n)
     present = np.bincount(label[conf], minlength=n) > 0
-    return bool(np.all(count[present] > 0))
+    return int(np.sum(present & (count <= 0))), int(present.sum())

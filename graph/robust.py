@@ -42,7 +42,7 @@ from scipy.stats import chi2
 from graph.batch import BuiltGraph, build, initial_guess, resolve_init, solve_lm
 from graph.calibration import VarianceFactors, refined_factor, scale_information, split_factors
 from graph.cluster_start import cluster_starts
-from graph.confident import confident_first, confident_holds, confident_start, confident_whole
+from graph.confident import confident_first, confident_holds, confident_start, confident_whole, whole_misfit_share
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.groups import drop_false_groups, group_threshold, retry_rejected
 from graph.kernel_start import dcs_solve, tls_descent
@@ -223,7 +223,7 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
         _costly_starts(cs, c2, best)
     else:
         conf_first = confident_first(cs, c2)
-        share = _whole_misfit_share(cs, c2) if conf_first else 0.0
+        share = whole_misfit_share(cs, c2) if conf_first else 0.0
         if share > cs.params.robust.confident_misfit_max_share:
             # as on the costly path: many confident clusters misfit whole at the confident map, so groups of
             # consistent false loops among the confident ones bent it; that start cannot stand alone, and its
@@ -244,18 +244,6 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
         # won for one that lost (manhattan random-grouped 30 %, seed 3: 0.8 -> 24 m without it)
         _run_start(cs, c2, "previous decision", extra, best, descent=True)
     return best
-
-
-def _whole_misfit_share(cs: ConsensusProblem, c2: np.ndarray) -> float:
-    """Share of the confident clusters none of whose loops fits its threshold at the map of the confident loops
-    (`confident_whole` asks whether it is zero)."""
-    label = cs.confident[0]
-    conf = label >= 0
-    fit = cs.built.subset(conf).r2(cs.confident[1]()) <= c2[conf]
-    n = int(label.max()) + 1
-    present = np.bincount(label[conf], minlength=n) > 0
-    hit = np.bincount(label[conf], weights=fit.astype(float), minlength=n) > 0
-    return float(np.sum(present & ~hit)) / max(int(present.sum()), 1)
 
 
 def _costly_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best) -> None:
