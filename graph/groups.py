@@ -111,9 +111,7 @@ def drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFac
     iters += it
 
     def objective(v: gtsam.Values, member: np.ndarray, c2g: float) -> float:
-        r = built.r2(v)
-        own = float(np.minimum(r[member], c2[member]).sum())
-        return tls_objective(base_graph, built, v, c2) + 0.5 * (min(float(r[member].sum()), c2g) - own)
+        return group_objective(base_graph, built, v, c2, [(member, c2g)])
 
     for g in order.tolist():
         member = component == g
