@@ -52,41 +52,6 @@ def ours_isam2(data: PoseGraphData, params: GraphParams | None = None) -> Method
     return MethodRun(res.poses, np.asarray(res.loop_inlier, bool), time.perf_counter() - t0)
 
 
-def ours_tail(on: bool):
-    """Ours with `robust.reach_tail` set either way (the default's other side, side by side in one run)."""
-    def run(data: PoseGraphData) -> MethodRun:
-        return ours(data, GraphParams().replace(robust={"reach_tail": on}))
-    return run
-
-
-def ours_own_cycle(on: bool):
-    """Ours with `robust.own_cycle_test` set either way (the default's other side, side by side in one run)."""
-    def run(data: PoseGraphData) -> MethodRun:
-        return ours(data, GraphParams().replace(robust={"own_cycle_test": on}))
-    return run
-
-
-def ours_short_screen(on: bool):
-    """Ours with `robust.short_tail_screen` set either way (the default's other side, side by side in one run)."""
-    def run(data: PoseGraphData) -> MethodRun:
-        return ours(data, GraphParams().replace(robust={"short_tail_screen": on}))
-    return run
-
-
-def ours_snoop(on: bool):
-    """Ours with `robust.data_snooping` set either way (graph.snooping; side by side in one run)."""
-    def run(data: PoseGraphData) -> MethodRun:
-        return ours(data, GraphParams().replace(robust={"data_snooping": on}))
-    return run
-
-
-def ours_trial_map(on: bool):
-    """Ours with `robust.trial_map_covariance` set either way (the default's other side, side by side in one run)."""
-    def run(data: PoseGraphData) -> MethodRun:
-        return ours(data, GraphParams().replace(robust={"trial_map_covariance": on}))
-    return run
-
-
 def ours_setting(**robust):
     """Ours with the given `robust` settings (a setting's other side, side by side with `ours` in one run)."""
     def run(data: PoseGraphData) -> MethodRun:
@@ -141,10 +106,10 @@ def g2o_dcs(data: PoseGraphData, phi: float = DCS_PHI) -> MethodRun:
     return MethodRun(poses, kept, seconds)
 
 
-METHODS = {"ours": ours, "ours-isam2": ours_isam2, "ours-tail-off": ours_tail(False), "ours-tail-on": ours_tail(True),
-           "ours-own-off": ours_own_cycle(False),
-           "ours-screen-on": ours_short_screen(True), "ours-screen-off": ours_short_screen(False), "ours-trial-map-on": ours_trial_map(True),
-           "ours-snoop-on": ours_snoop(True), "ours-snoop-off": ours_snoop(False),
+METHODS = {"ours": ours, "ours-isam2": ours_isam2, "ours-tail-off": ours_setting(reach_tail=False), "ours-tail-on": ours_setting(reach_tail=True),
+           "ours-own-off": ours_setting(own_cycle_test=False),
+           "ours-screen-on": ours_setting(short_tail_screen=True), "ours-screen-off": ours_setting(short_tail_screen=False), "ours-trial-map-on": ours_setting(trial_map_covariance=True),
+           "ours-snoop-on": ours_setting(data_snooping=True), "ours-snoop-off": ours_setting(data_snooping=False),
            "ours-refine-on": ours_setting(calibration_refine=5), "ours-refine-off": ours_setting(calibration_refine=0),
            "gtsam-gnc": gtsam_gnc, "dcs": dcs, "g2o-dcs": g2o_dcs, "plain-lm": plain_lm}
 # peers run on contaminated graphs only up to --peer-max-nodes (minutes per row beyond)
