@@ -112,23 +112,26 @@ def cluster_starts(cs, c2: np.ndarray) -> list[tuple[str, gtsam.Values, np.ndarr
 
     robust = cs.params.robust
     alone = robust.core_start and robust.core_alone
-    with reduced():
-        guesses = [("odometry", lambda: cs.odometry_values)]
-        try:
-            guess = initial_guess(cs.data, cs.stated.subset(mask), cs.method)
-            lago = ("representatives' LAGO / chordal", lambda: values_from_array(cs.data.dim, guess))
-            # with `core_alone` the cheaper one first where the reduced graph goes PCG (w10000 at 50 %
-            # random-grouped: 5 s against 63 s from the odometry chain); on a direct one the odometry chain first
-            # (`cluster_decided_alone`: city10000, 2.5 s against 9.4 s CPU, and its decision the one that stands).
-            # The lower reduced objective still picks between the two
-            first = alone and (pcg or not robust.cluster_decided_alone)
-            guesses.insert(0 if first else 1, lago)
-        except RuntimeError:
-            cs.notes.append("cluster start: LAGO / chordal on the representatives failed")
+    guesses = [("odometry", lambda: cs.odometry_values)]
+    # made only when its GNC runs (`cluster_decided_alone` may skip it)
+    lago = ("representatives' LAGO / chordal",
+            lambda: values_from_array(cs.data.dim, initial_guess(cs.data, cs.stated.subset(mask), cs.method)))
+    # with `core_alone` the cheaper one first where the reduced graph goes PCG (w10000 at 50 % random-grouped: 5 s
+    # against 63 s from the odometry chain); on a direct one the odometry chain first (`cluster_decided_alone`:
+    # city10000, 2.5 s against 9.4 s CPU, and its decision the one that stands). The lower reduced objective still
+    # picks between the two
+    first = alone and (pcg or not robust.cluster_decided_alone)
+    guesses.insert(0 if first else 1, lago)
     grown = None                                    # the core grown for `core_alone`, reused below
     for i, (name, v0) in enumerate(guesses):
         with reduced():
-            v, kept, outer, _ = gnc_tls(cs.base, reps, v0(), c2_rep, cl, cs.params)
+            try:
+                start = v0()
+            except RuntimeError:
+                cs.notes.append("cluster start: LAGO / chordal on the representatives failed")
+                continue
+            v, kept, outer, _ = gnc_tls(cs.base, reps, start, c2_rep, cl, cs.params,
+                                        zero_below_tol=robust.cluster_zero_weights)
             f = tls_objective(cs.base_graph, reps, v, c2_rep)
         kept_cl = np.unique(cl[kept])
         cs.notes.append(f"cluster start from {name}: GNC {outer} steps, {len(kept_cl)} of {n_cl} "

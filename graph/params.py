@@ -132,14 +132,6 @@ class RobustParams(Config):
     gnc_mu_floor: float = setting(1.0, range="[0, inf)",
                                   doc="initial control parameter at least this after the gate's warm start")
     gnc_weights_tol: float = setting(1e-4, range="[0, inf)", doc="stop when weights are binary to this tolerance (TLS)")
-    gnc_zero_below_tol: bool = setting(
-        True, doc="in the consensus GNC (graph.tls.gnc_tls) a loop whose weight is below `gnc_weights_tol` (the "
-                  "tolerance at which its stopping test already counts a weight as 0) leaves the step's graph "
-                  "instead of staying in it at that weight. Far from the convex start such loops pull by a constant "
-                  "sqrt(mu c^2) each, whatever their residual, and as long-range edges they fill in every step: "
-                  "city10000 at 50 % random-grouped, the reduced graph's GNC from the odometry chain held 2053 of "
-                  "its 2206 representatives below it at the first step (7.1 s -> 2.5 s CPU; seed 1 then keeps no "
-                  "false cluster instead of 8). false: the previous floor, 1e-9 (docs/graph.md)")
     gnc_cost_tol: float = setting(1e-5, range="[0, inf)",
                                   doc="... or when the weighted cost changes less than this, relative")
     reinit_rounds: int = setting(5, range="[0, inf)")   # after the robust solve: descend the TLS objective with
@@ -387,6 +379,15 @@ class RobustParams(Config):
             "more: spread evenly from its first to its last loop in time, each with an even share of the cluster's "
             "information and threshold). One edge per cluster lets the reduced GNC fit a false group by a kink of "
             "the odometry at its ends that the group's ten parallel loops would resist (docs/graph.md)")
+    cluster_zero_weights: bool = setting(
+        True, doc="in the GNC over clusters on the reduced graph of `cluster_start`, a representative whose weight "
+                  "is below `gnc_weights_tol` (where the stopping test already counts a weight as 0) leaves the "
+                  "step's graph instead of staying in it at that weight (graph.tls.gnc_tls). Far from the convex "
+                  "start such loops pull by ~sqrt(mu c^2) each whatever their residual, and as long-range edges "
+                  "fill in every step: city10000 at 50 % random-grouped, the GNC from the odometry chain held 2053 "
+                  "of 2206 representatives below it at its first step; 7.1 -> 2.5 s CPU, and seed 1's decision "
+                  "there keeps no false cluster instead of 8 (docs/graph.md). false: the floor of every other GNC, "
+                  "1e-9")
     cluster_decided_alone: bool = setting(
         True, doc="with `cluster_start`, where the first reduced GNC's kept clusters do not fill in and at most "
                   "`core_alone_max_split` of the clusters are undecided at its map (a kept one with a loop "

@@ -104,14 +104,17 @@ class _IsamSteps:
 
 
 def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, label: np.ndarray,
-            params: GraphParams, isam2_gauss_newton: bool = False, final_solve: bool = True
-            ) -> tuple[gtsam.Values, np.ndarray, int, int]:
+            params: GraphParams, isam2_gauss_newton: bool = False, final_solve: bool = True,
+            zero_below_tol: bool = False) -> tuple[gtsam.Values, np.ndarray, int, int]:
     """GNC-TLS over the loops of `sub` from `values` with one weight per label (cluster); returns (values,
     inlier per loop, outer steps, LM iterations). Odometry + anchor (`base`) are known inliers.
     `isam2_gauss_newton`: iSAM2 steps (`consensus_isam2_steps`) by Gauss-Newton instead of dogleg.
     `final_solve` False: the caller solves the returned labels to convergence itself (or discards the map), so the
     GNC ends at the step whose weights no longer change without solving it, and without the warm LM step after
-    iSAM2 steps; the labels are the same, the map is the last step's."""
+    iSAM2 steps; the labels are the same, the map is the last step's.
+    `zero_below_tol`: a loop whose weight is below `gnc_weights_tol` (the tolerance at which the stopping test
+    already counts a weight as 0) leaves the step's graph instead of staying in it at that weight (the reduced graph
+    of graph.cluster_start, `cluster_zero_weights`)."""
     loops = sub.loops
     L = len(loops)
     n_cl = int(label.max()) + 1 if L else 0
@@ -126,8 +129,7 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
         pos = excess > 0
         mu = max(float(np.min(c2_cl[pos] / excess[pos])), 1e-6)
         tol = params.robust.gnc_weights_tol
-        # a weight the stopping test counts as 0 is 0 in the step's graph too (`gnc_zero_below_tol`)
-        floor = tol if params.robust.gnc_zero_below_tol else 1e-9
+        floor = tol if zero_below_tol else 1e-9
         # iSAM2 only where the scope would factor the step's graph directly (its fill-in is the same)
         use_isam = params.robust.consensus_isam2_steps and not costly(
             lambda: graph_pairs(weighted_graph(base, loops, np.ones(L))))

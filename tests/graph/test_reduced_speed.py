@@ -1,5 +1,5 @@
 """The two cuts of the cluster path's cost (graph.cluster_start, graph.tls): a GNC weight below `gnc_weights_tol`
-leaves the step's graph (`gnc_zero_below_tol`), and the second reduced GNC is skipped where the first leaves every
+leaves the step's graph (`cluster_zero_weights`), and the second reduced GNC is skipped where the first leaves every
 cluster decided at its map (`cluster_decided_alone`). Each keeps the labels: the same loops with it on and off, on
 graphs with groups of consistent false loops (Vertigo's random-grouped policy) and on clean ones, both on the
 cluster path (forced by `solver.direct_max_cost`) and on the ordinary one."""
@@ -26,7 +26,7 @@ def _grouped(laps: int, side: int, seed: int, fraction: float = 0.5):
 
 @pytest.mark.parametrize("laps,side,seed", [(4, 12, 1), (3, 20, 3), (4, 15, 2)])
 @pytest.mark.parametrize("limit", [0.0, SPLIT_COST, None])
-@pytest.mark.parametrize("setting", ["gnc_zero_below_tol", "cluster_decided_alone"])
+@pytest.mark.parametrize("setting", ["cluster_zero_weights", "cluster_decided_alone"])
 def test_same_labels_with_the_cut_on_and_off(laps, side, seed, limit, setting):
     bad, false, truth = _grouped(laps, side, seed)
     params = GraphParams() if limit is None else GraphParams().replace(solver={"direct_max_cost": limit})
@@ -37,7 +37,7 @@ def test_same_labels_with_the_cut_on_and_off(laps, side, seed, limit, setting):
     assert abs(ate(truth, on.poses) - ate(truth, off.poses)) <= 1e-6
 
 
-@pytest.mark.parametrize("setting", ["gnc_zero_below_tol", "cluster_decided_alone"])
+@pytest.mark.parametrize("setting", ["cluster_zero_weights", "cluster_decided_alone"])
 def test_clean_graph_unchanged_by_the_cut(setting):
     truth = square_laps(3, 15)
     data, _ = noisy_graph(truth, np.random.default_rng(4))
