@@ -1,8 +1,9 @@
-"""The two cuts of the cluster path's cost (graph.cluster_start, graph.tls): a GNC weight below `gnc_weights_tol`
-leaves the step's graph (`cluster_zero_weights`), and the second reduced GNC is skipped where the first leaves every
-cluster decided at its map (`cluster_decided_alone`). Each keeps the labels: the same loops with it on and off, on
-graphs with groups of consistent false loops (Vertigo's random-grouped policy) and on clean ones, both on the
-cluster path (forced by `solver.direct_max_cost`) and on the ordinary one."""
+"""The two cuts of the reduced graph's cost (graph.cluster_start): a representative whose GNC weight is below
+`gnc_weights_tol` leaves the step's graph (`cluster_zero_weights`), and the second reduced GNC is skipped where the
+first leaves every cluster decided at its map (`cluster_decided_alone`). Each keeps the labels: the same loops with
+it on and off, on graphs with groups of consistent false loops (Vertigo's random-grouped policy) and on clean ones,
+on the cluster path (forced by `solver.direct_max_cost`: every graph filling in, or only the candidates with the
+false groups) and on the ordinary one."""
 import numpy as np
 import pytest
 
@@ -32,6 +33,18 @@ def test_same_labels_with_the_cut_on_and_off(laps, side, seed, limit, setting):
     params = GraphParams() if limit is None else GraphParams().replace(solver={"direct_max_cost": limit})
     on = robust_solve(bad, params.replace(robust={setting: True}))
     off = robust_solve(bad, params.replace(robust={setting: False}))
+    assert np.array_equal(on.loop_inlier, off.loop_inlier)
+    assert on.loop_inlier[~false].all() and not on.loop_inlier[false].any()
+    assert abs(ate(truth, on.poses) - ate(truth, off.poses)) <= 1e-6
+
+
+def test_same_labels_where_the_first_reduced_decision_leaves_every_cluster_decided():
+    # five representatives a cluster: the reduced decision from the odometry chain fits every kept cluster whole and
+    # misfits every rejected one whole at its map (this draw), so the other reduced GNC is the one skipped
+    bad, false, truth = _grouped(4, 12, 1)
+    params = GraphParams().replace(solver={"direct_max_cost": SPLIT_COST}, robust={"cluster_representatives": 5})
+    on = robust_solve(bad, params.replace(robust={"cluster_decided_alone": True}))
+    off = robust_solve(bad, params.replace(robust={"cluster_decided_alone": False}))
     assert np.array_equal(on.loop_inlier, off.loop_inlier)
     assert on.loop_inlier[~false].all() and not on.loop_inlier[false].any()
     assert abs(ate(truth, on.poses) - ate(truth, off.poses)) <= 1e-6
