@@ -16,8 +16,11 @@ thresholds (the same truncation a cluster weight of graph.tls.gnc_tls would have
 residuals against the sum of n thresholds). Ten parallel false loops become one long-range edge, and the reduced
 graph's fill-in is that of ~10^3 long-range edges (city10000 above: ~1.4e9). GNC over clusters runs there from two
 starts (the odometry chain; LAGO / chordal on the representatives), and the one with the lower TLS objective on the
-reduced graph is the start for the full graph (graph.robust): GNC over the loops of its kept clusters (a false group
-it kept is rejected there loop by loop), then TLS descent over every candidate (graph.kernel_start.tls_descent),
+reduced graph is the start for the full graph (graph.robust); where the first one's decision leaves every cluster
+decided at its map (kept ones fit whole, rejected ones misfit whole: `undecided_share`), the second is not made
+(`cluster_decided_alone`), and a representative whose GNC weight is below the GNC's zero tolerance is out of the
+step's graph (`cluster_zero_weights`). The chosen decision goes on: GNC over the loops of its kept clusters (a
+false group it kept is rejected there loop by loop), then TLS descent over every candidate (graph.kernel_start.tls_descent),
 which keeps the loops that fit (the false groups the reduced decision rejected do not fit and are never factored);
 its TLS objective is compared with the other starts' as elsewhere. Where the loops of its kept clusters fill in
 themselves (false groups the reduced graph kept: w10000), the core of the largest confident clusters
