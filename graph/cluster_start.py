@@ -20,9 +20,9 @@ reduced graph is the start for the full graph (graph.robust); where the first on
 decided at its map (kept ones fit whole, rejected ones misfit whole: `undecided_share`), the second is not made
 (`cluster_decided_alone`), and a representative whose GNC weight is below the GNC's zero tolerance is out of the
 step's graph (`cluster_zero_weights`). The chosen decision goes on: GNC over the loops of its kept clusters (a
-false group it kept is rejected there loop by loop), then TLS descent over every candidate (graph.kernel_start.tls_descent),
-which keeps the loops that fit (the false groups the reduced decision rejected do not fit and are never factored);
-its TLS objective is compared with the other starts' as elsewhere. Where the loops of its kept clusters fill in
+false group it kept is rejected there loop by loop), then TLS descent over every candidate
+(graph.kernel_start.tls_descent), which keeps the loops that fit (the false groups the reduced decision rejected do
+not fit and are never factored); its TLS objective is compared with the other starts' as elsewhere. Where the loops of its kept clusters fill in
 themselves (false groups the reduced graph kept: w10000), the core of the largest confident clusters
 (graph.core_start) is made too, and the lower TLS objective over every loop, each at its own map, goes on.
 """
