@@ -255,14 +255,21 @@ class _AllIterative:
         return True
 
 
+def above(pairs: Callable[[], np.ndarray], limit: float) -> bool:
+    """Whether a graph with the edges `pairs()` is estimated above `limit` in the current scope (`iterative_above`
+    makes its calls iterative then); False outside a scope or in an all-direct one."""
+    outer = _SCOPE.get()
+    return not (outer is None or outer.all_direct or fill_cost(np.asarray(pairs()), outer.dim, limit) <= limit)
+
+
 @contextmanager
-def iterative_above(pairs: Callable[[], np.ndarray], limit: float) -> Iterator[None]:
+def iterative_above(pairs: Callable[[], np.ndarray], limit: float, dear: bool | None = None) -> Iterator[None]:
     """Inside the block every LM call's graph is a subgraph of the edges `pairs()` (as with `narrow`), and every
     call is iterative when those are estimated above `limit` (else `narrow`'s choice). For solves of a few warm
     iterations each (a GNC's steps), where PCG's slower convergence to a tight tolerance costs little. No-op outside
-    a scope or in an all-direct one."""
+    a scope or in an all-direct one. `dear`: `above(pairs, limit)` when the caller has it already."""
     outer = _SCOPE.get()
-    if outer is None or outer.all_direct or fill_cost(np.asarray(pairs()), outer.dim, limit) <= limit:
+    if not (above(pairs, limit) if dear is None else dear):
         with narrow(pairs):
             yield
         return

@@ -379,6 +379,22 @@ class RobustParams(Config):
             "more: spread evenly from its first to its last loop in time, each with an even share of the cluster's "
             "information and threshold). One edge per cluster lets the reduced GNC fit a false group by a kink of "
             "the odometry at its ends that the group's ten parallel loops would resist (docs/graph.md)")
+    cluster_zero_weights: bool = setting(
+        True, doc="in the GNC over clusters on the reduced graph of `cluster_start`, a representative whose weight "
+                  "is below `gnc_weights_tol` (where the stopping test already counts a weight as 0) leaves the "
+                  "step's graph instead of staying in it at that weight (graph.tls.gnc_tls). Far from the convex "
+                  "start such loops pull by ~sqrt(mu c^2) each whatever their residual, and as long-range edges "
+                  "fill in every step: city10000 at 50 % random-grouped, the GNC from the odometry chain held 2053 "
+                  "of 2206 representatives below it at its first step; 7.1 -> 2.5 s CPU, and seed 1's decision "
+                  "there keeps no false cluster instead of 8 (docs/graph.md). false: the floor of every other GNC, "
+                  "1e-9")
+    cluster_decided_alone: bool = setting(
+        True, doc="with `cluster_start`, where the first reduced GNC's kept clusters do not fill in and at most "
+                  "`core_alone_max_split` of the clusters are undecided at its map (a kept one with a loop "
+                  "misfitting, a rejected one with a loop fitting: graph.cluster_start.undecided_share), the other "
+                  "reduced GNC is skipped; on a reduced graph solved directly the odometry chain's GNC goes first "
+                  "then (city10000 at 50 % random-grouped: every cluster decided right from it, 0 undecided, "
+                  "against 0.32-0.33 from the representatives' LAGO, whose GNC cost 9.4 s CPU of the stage's 16)")
     core_start: bool = setting(
         True, doc="where the reduced decision of `cluster_start` keeps clusters whose loops fill in themselves (above "
                   "`solver.direct_max_cost`: false groups it kept), also grow a start from the largest confident "

@@ -16,22 +16,24 @@ from graph.linear import costly, graph_pairs
 from graph.params import GraphParams
 
 
-def weighted_graph(base_factors: list, loops: list, weights: np.ndarray) -> gtsam.NonlinearFactorGraph:
+def weighted_graph(base_factors: list, loops: list, weights: np.ndarray, floor: float = 1e-9
+                   ) -> gtsam.NonlinearFactorGraph:
+    """`base_factors` + each loop at its weight; a weight at or below `floor` leaves the loop out."""
     g = graph_of(base_factors)
     for f, w in zip(loops, weights.tolist()):
         if w >= 1.0 - 1e-9:
             g.add(f)
-        elif w > 1e-9:
+        elif w > floor:
             r = np.asarray(f.noiseModel().R(), float)
             g.add(f.cloneWithNewNoiseModel(gtsam.noiseModel.Gaussian.SqrtInformation(np.sqrt(w) * r)))
     return g
 
 
-def _loop_factor(f, w: float):
+def _loop_factor(f, w: float, floor: float = 1e-9):
     """The loop factor at weight w (None: out), as `weighted_graph` builds it."""
     if w >= 1.0 - 1e-9:
         return f
-    if w > 1e-9:
+    if w > floor:
         r = np.asarray(f.noiseModel().R(), float)
         return f.cloneWithNewNoiseModel(gtsam.noiseModel.Gaussian.SqrtInformation(np.sqrt(w) * r))
     return None
@@ -50,7 +52,7 @@ class _IsamSteps:
     the loops whose weight changed and re-factors the cliques they and the moved poses touch."""
 
     def __init__(self, base: list, loops: list, values: gtsam.Values, relinearize: float,
-                 gauss_newton: bool = False):
+                 gauss_newton: bool = False, floor: float = 1e-9):
         p = gtsam.ISAM2Params()
         if gauss_newton:
             # undamped, with the whole back-substitution (wildfire 0: no stale part of the step): where only a few
@@ -74,6 +76,7 @@ class _IsamSteps:
         self.loops = loops
         self.base = base
         self.values = values
+        self.floor = floor
         self.weight = np.full(len(loops), np.nan)     # weight each loop is held at (nan: not yet added)
         self.index = np.full(len(loops), -1, np.int64)  # its factor index in iSAM2 (-1: out)
 
@@ -86,7 +89,7 @@ class _IsamSteps:
         remove = [int(i) for i in self.index[changed] if i >= 0]
         added = []
         for k in changed.tolist():
-            f = _loop_factor(self.loops[k], float(w[k]))
+            f = _loop_factor(self.loops[k], float(w[k]), self.floor)
             self.index[k] = -1
             if f is not None:
                 new.add(f)
@@ -101,14 +104,17 @@ class _IsamSteps:
 
 
 def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, label: np.ndarray,
-            params: GraphParams, isam2_gauss_newton: bool = False, final_solve: bool = True
-            ) -> tuple[gtsam.Values, np.ndarray, int, int]:
+            params: GraphParams, isam2_gauss_newton: bool = False, final_solve: bool = True,
+            zero_below_tol: bool = False) -> tuple[gtsam.Values, np.ndarray, int, int]:
     """GNC-TLS over the loops of `sub` from `values` with one weight per label (cluster); returns (values,
     inlier per loop, outer steps, LM iterations). Odometry + anchor (`base`) are known inliers.
     `isam2_gauss_newton`: iSAM2 steps (`consensus_isam2_steps`) by Gauss-Newton instead of dogleg.
     `final_solve` False: the caller solves the returned labels to convergence itself (or discards the map), so the
     GNC ends at the step whose weights no longer change without solving it, and without the warm LM step after
-    iSAM2 steps; the labels are the same, the map is the last step's."""
+    iSAM2 steps; the labels are the same, the map is the last step's.
+    `zero_below_tol`: a loop whose weight is below `gnc_weights_tol` (the tolerance at which the stopping test
+    already counts a weight as 0) leaves the step's graph instead of staying in it at that weight (the reduced graph
+    of graph.cluster_start, `cluster_zero_weights`)."""
     loops = sub.loops
     L = len(loops)
     n_cl = int(label.max()) + 1 if L else 0
@@ -123,6 +129,7 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
         pos = excess > 0
         mu = max(float(np.min(c2_cl[pos] / excess[pos])), 1e-6)
         tol = params.robust.gnc_weights_tol
+        floor = tol if zero_below_tol else 1e-9
         # iSAM2 only where the scope would factor the step's graph directly (its fill-in is the same)
         use_isam = params.robust.consensus_isam2_steps and not costly(
             lambda: graph_pairs(weighted_graph(base, loops, np.ones(L))))
@@ -150,7 +157,7 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
             if few:
                 if isam is None:
                     isam = _IsamSteps(base, loops, values, params.robust.consensus_isam2_relinearize,
-                                       isam2_gauss_newton)
+                                       isam2_gauss_newton, floor)
                 values = isam.step(new_w[label], params.robust.consensus_isam2_updates)
                 iters += params.robust.consensus_isam2_updates
                 polish = True
@@ -159,7 +166,7 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
                 # its own ordering of the changed part: one such step took 4.6 s on w10000): LM on the whole graph.
                 # iSAM2's linearisation is then stale: it starts again from this solution when needed
                 isam = None
-                values, it = solve_lm(weighted_graph(base, loops, new_w[label]), values, params, inner)
+                values, it = solve_lm(weighted_graph(base, loops, new_w[label], floor), values, params, inner)
                 iters += it
                 polish = False
             r2_cl = np.bincount(label, weights=sub.r2(values), minlength=n_cl)
@@ -170,7 +177,7 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
             mu *= params.robust.consensus_mu_step
         if polish and final_solve:
             # iSAM2's estimate is a few partial Gauss-Newton steps: the warm LM step the LM path ends on, from it
-            values, it = solve_lm(weighted_graph(base, loops, weights[label]), values, params,
+            values, it = solve_lm(weighted_graph(base, loops, weights[label], floor), values, params,
                                   params.robust.consensus_inner_iterations)
             iters += it
     return values, (weights > 0.5)[label], outer, iters
