@@ -17,7 +17,9 @@
    quantile of its n x dof, dropped when the objective is lower without it); then re-admit every rejected loop
    that fits its own threshold at the solution.
    Then the short-tail screen (`_short_tail_screen`): the kept short-span loops are judged at the kept loops' tail
-   margin on the map re-solved without them, where a false loop that bent its few steps of odometry no longer fits.
+   margin on the map re-solved without them, where a false loop that bent its few steps of odometry no longer fits
+   (at the family-wise bound of the kept loops instead where they follow the calibrated model; each dropped revisit
+   offered back by a solve over its neighbourhood, graph.local_solve).
    Then the own-cycle test (graph.short_span): a kept loop between nodes a few steps apart whose cycle with the
    odometry between its ends is worse than the agreeing cycles of the kept loops is dropped.
    Then, with `data_snooping` (off by default), the kept loops beyond the family-wise bound of their studentized
