@@ -188,6 +188,7 @@ class _Best:
     inlier: np.ndarray | None = None
     untouched: bool = False      # GNC took no step and kept every candidate: local consensus = global solution
     iterations: int = 0
+    kept: list[np.ndarray] = field(default_factory=list)     # the loops each start kept, in the order run
 
 
 def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values, best: _Best,
@@ -205,6 +206,7 @@ def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values
     inlier = np.zeros(cs.loops, bool)
     inlier[cand] = kept
     f = tls_objective(cs.base_graph, sub, values, c2[cand])
+    best.kept.append(inlier)
     cs.notes.append(f"start {name}: {'TLS descent' if descent else 'GNC'} {outer} steps, TLS objective {f:.6g}, "
                     f"{int(kept.sum())} loops kept")
     if best.values is None or f < best.objective:
@@ -447,7 +449,8 @@ def decide(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None = No
         values, it = cs.lm(cs.built.graph(inlier), values, cs.params.solver.lm_max_iterations)
         iters += it
         values, inlier, it = drop_false_groups(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale,
-                                               cs.method, cs.params, cs.notes, cs.stated)
+                                               cs.method, cs.params, cs.notes, cs.stated,
+                                               best.kept if cs.params.robust.group_disputed else None)
     iters += it
     values, inlier, it = retry_rejected(cs.data, cs.built, cs.base_graph, values, inlier, cs.cand, c2, cs.scale,
                                         cs.params, cs.notes)
