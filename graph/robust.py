@@ -14,8 +14,8 @@
    thresholds. A group of mutually consistent false loops is thus one hypothesis that the rest of the map accepts
    or rejects as a whole. Inner solves are warm-started (a few LM iterations per step).
 4. polish with the kept loops; the group-level test (each kept revisit cluster one TLS term at the chi-square
-   quantile of its n x dof, dropped when the objective is lower without it; those nearest their thresholds and
-   those some start rejected whole); then re-admit every rejected loop
+   quantile of its n x dof, dropped when the objective is lower without it; those nearest their thresholds, and with
+   `group_disputed` those some start rejected whole); then re-admit every rejected loop
    that fits its own threshold at the solution.
    Then the short-tail screen (`_short_tail_screen`): the kept short-span loops are judged at the kept loops' tail
    margin on the map re-solved without them, where a false loop that bent its few steps of odometry no longer fits.

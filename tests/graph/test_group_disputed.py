@@ -55,12 +55,12 @@ def test_without_disputes_the_budget_bounds_the_test():
 
 
 def test_manhattan_random_grouped_10_seed_1(manhattan):
-    # a reporting draw: the odometry start kept part of a false group (1845.. -> 2508..), 11th in the group test's
+    # (the setting is off by default: it breaks ringCity random-grouped rows, docs/graph.md) a reporting draw: the odometry start kept part of a false group (1845.. -> 2508..), 11th in the group test's
     # order, and won; 20.8 m, 21 true loops dropped without the disputed clusters
     from vslam.bench.graph_outliers import add_false_loops
     data, truth = manhattan
     bad, false = add_false_loops(data, "random-grouped", 0.1, 1)
-    res = robust_solve(bad, GraphParams())
+    res = robust_solve(bad, GraphParams().replace(robust={"group_disputed": True}))
     assert not res.loop_inlier[false & ~coincidentally_true(bad, truth)].any()
     assert res.loop_inlier[~false].all()
     assert ate(truth, res.poses) < 0.85
@@ -69,7 +69,7 @@ def test_manhattan_random_grouped_10_seed_1(manhattan):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_clean_two_laps_unchanged(seed):
     clean, _ = noisy_graph(square_laps(2, 30), np.random.default_rng(seed), loop_every=4)
-    on = robust_solve(clean, GraphParams())
+    on = robust_solve(clean, GraphParams().replace(robust={"group_disputed": True}))
     off = robust_solve(clean, GraphParams().replace(robust={"group_disputed": False}))
     assert on.loop_inlier.all()
     assert np.array_equal(on.loop_inlier, off.loop_inlier)
