@@ -14,7 +14,8 @@
    thresholds. A group of mutually consistent false loops is thus one hypothesis that the rest of the map accepts
    or rejects as a whole. Inner solves are warm-started (a few LM iterations per step).
 4. polish with the kept loops; the group-level test (each kept revisit cluster one TLS term at the chi-square
-   quantile of its n x dof, dropped when the objective is lower without it); then re-admit every rejected loop
+   quantile of its n x dof, dropped when the objective is lower without it; those nearest their thresholds, and with
+   `group_disputed` those some start rejected whole); then re-admit every rejected loop
    that fits its own threshold at the solution.
    Then the short-tail screen (`_short_tail_screen`): the kept short-span loops are judged at the kept loops' tail
    margin on the map re-solved without them, where a false loop that bent its few steps of odometry no longer fits
@@ -191,6 +192,7 @@ class _Best:
     inlier: np.ndarray | None = None
     untouched: bool = False      # GNC took no step and kept every candidate: local consensus = global solution
     iterations: int = 0
+    kept: list[np.ndarray] = field(default_factory=list)     # the loops each start kept, in the order run
 
 
 def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values, best: _Best,
@@ -208,6 +210,7 @@ def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values
     inlier = np.zeros(cs.loops, bool)
     inlier[cand] = kept
     f = tls_objective(cs.base_graph, sub, values, c2[cand])
+    best.kept.append(inlier)
     cs.notes.append(f"start {name}: {'TLS descent' if descent else 'GNC'} {outer} steps, TLS objective {f:.6g}, "
                     f"{int(kept.sum())} loops kept")
     if best.values is None or f < best.objective:
@@ -450,7 +453,8 @@ def decide(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None = No
         values, it = cs.lm(cs.built.graph(inlier), values, cs.params.solver.lm_max_iterations)
         iters += it
         values, inlier, it = drop_false_groups(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale,
-                                               cs.method, cs.params, cs.notes, cs.stated)
+                                               cs.method, cs.params, cs.notes, cs.stated,
+                                               best.kept if cs.params.robust.group_disputed else None)
     iters += it
     values, inlier, it = retry_rejected(cs.data, cs.built, cs.base_graph, values, inlier, cs.cand, c2, cs.scale,
                                         cs.params, cs.notes)
