@@ -7,17 +7,14 @@ from scipy.stats import chi2
 
 from graph import GraphParams
 from graph.calibration import split_factors
-from graph.formats import read_graph
 from graph.robust import robust_solve
 from graph.support import cycle_support
+from tests.graph.shared_graphs import se_sync_graph
 
 
 @pytest.fixture(scope="module")
 def garage(shared_data):
-    g = shared_data / "posegraphs" / "se-sync" / "parking-garage.g2o"
-    if not g.exists():
-        pytest.skip(f"{g} not present")
-    return read_graph(g)
+    return se_sync_graph(shared_data, "parking-garage")
 
 
 def _factors(data):

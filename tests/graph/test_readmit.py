@@ -11,11 +11,12 @@ import pytest
 
 import graph.robust as robust
 import graph.tls as tls
-from graph import GraphParams, read_graph
+from graph import GraphParams
 from graph.batch import build, initial_guess, lm_params
 from graph.factors import graph_of, values_from_array
 from graph.params import InitMethod
 from graph.readmit import readmit_dropped, readmit_supported
+from tests.graph.shared_graphs import se_sync_graph
 from tests.graph.synth import noisy_graph, square_laps
 from vslam.bench.graph_outliers import add_false_loops
 
@@ -97,10 +98,7 @@ def test_rejected_loops_supported_by_kept_loops_come_back_and_a_misfitting_one_s
 @pytest.mark.parametrize("fraction, seed", [(0.1, 2), (0.3, 1)])
 def test_intel_random_false_loops_keep_every_true_loop(shared_data, fraction, seed):
     # before: (0.1, 2) the trial dropped 2 true loops; (0.3, 1) the GNC over the supported loops rejected 2
-    p = shared_data / "posegraphs" / "se-sync" / "intel.g2o"
-    if not p.exists():
-        pytest.skip(f"{p} not present")
-    bad, false = add_false_loops(read_graph(p), "random", fraction, seed)
+    bad, false = add_false_loops(se_sync_graph(shared_data, "intel"), "random", fraction, seed)
     res = robust.robust_solve(bad, GraphParams())
     kept = np.asarray(res.loop_inlier, bool)
     assert kept[~false].all()                  # before: 2 of 785 true loops dropped
@@ -112,10 +110,7 @@ def test_a_rejected_consistent_group_is_not_readmitted_through_one_kept_neighbou
     # candidates, came back together and bent the map: 98.2 % of the false loops rejected, 7.0 cm from the clean
     # optimum (98.7 % and 2.5 cm without the readmission step). A candidate must be supported by kept loops at least
     # as much as by rejected ones.
-    p = shared_data / "posegraphs" / "se-sync" / "intel.g2o"
-    if not p.exists():
-        pytest.skip(f"{p} not present")
-    bad, false = add_false_loops(read_graph(p), "local-grouped", 0.5, 2)
+    bad, false = add_false_loops(se_sync_graph(shared_data, "intel"), "local-grouped", 0.5, 2)
     res = robust.robust_solve(bad, GraphParams())
     kept = np.asarray(res.loop_inlier, bool)
     assert kept[~false].all()

@@ -3,14 +3,12 @@ import numpy as np
 import pytest
 
 from graph import GraphParams, inject_false_loops, loop_scores, optimize, read_graph
+from tests.graph.shared_graphs import se_sync_graph
 
 
 @pytest.fixture(scope="module")
 def csail(shared_data):
-    p = shared_data / "posegraphs" / "se-sync" / "CSAIL.g2o"
-    if not p.exists():
-        pytest.skip(f"{p} not present")
-    return read_graph(p)
+    return se_sync_graph(shared_data, "CSAIL")
 
 
 def test_csail_least_squares_and_isam2(csail):
