@@ -335,6 +335,13 @@ class RobustParams(Config):
                                       "with them back; w10000 at 50 % local, seed 2: the five true loops closing "
                                       "its last 100 nodes, rejected whole by the winning DCS-kernel start, ATE "
                                       "0.19 -> 0.07 m with them back). 0: off (docs/graph.md)")
+    retry_forecast: bool = setting(
+        True, unit="flag",
+        doc="the re-try of a rejected cluster (`retry_clusters`) is first made on the Gaussian marginal of the solved "
+            "map on the cluster's end poses (graph.reduced.forced_descent: all its loops in, LM, TLS descent); when "
+            "none of its loops survives there, the whole-graph re-try is not made (city10000 at 50 % random: three "
+            "chance-agreeing false pairs, ~13 s of whole-graph LM and descent each, all dropped again); the forecast "
+            "holds the kept loops fixed, so a re-try that would only push kept loops out is not made either")
     group_margin_once: bool = setting(True, doc="the group test's threshold (graph.groups.group_threshold) grants "
                                                 "the heavy-tail margin (calibration_margin) once, on one loop's "
                                                 "chi-square quantile, and holds the n x dof quantile to the larger "

@@ -7,14 +7,17 @@ loops end: the rest of the map only moves with them. So the same GNC is run firs
 poses: the known factors (anchor, odometry and the kept loops) linearised at the solution and marginalised onto the
 end poses (one partial elimination, `GaussianFactorGraph.marginal`), plus the tried loops, nonlinear as they are.
 Exact to first order in the map's move; the kept loops are held there, where the whole-graph trial may re-weight
-them. When that GNC keeps none of the tried loops the whole-graph trial is not run (graph.robust).
+them. When that GNC keeps none of the tried loops the whole-graph trial is not run (graph.robust). The re-try of
+a rejected cluster (graph.groups.retry_rejected) is forecast the same way (`forced_descent`).
 """
 from __future__ import annotations
 
 import gtsam
 import numpy as np
 
+from graph.batch import lm_params
 from graph.factors import graph_of, squared_residuals
+from graph.kernel_start import tls_descent
 from graph.linear import direct
 from graph.params import GraphParams
 from graph.tls import gnc_tls
@@ -52,4 +55,19 @@ def reduced_gnc(known: list, values: gtsam.Values, loops: list, c2: np.ndarray, 
     with direct():
         _, kept, _, _ = gnc_tls(base, _Loops(loops), small, c2, np.arange(len(loops)),
                                 params.replace(robust={"consensus_isam2_steps": False}))
+    return kept
+
+
+def forced_descent(known: list, values: gtsam.Values, loops: list, c2: np.ndarray, dim: int,
+                   params: GraphParams) -> np.ndarray:
+    """Which of `loops` (thresholds `c2`) the re-try of a rejected cluster (graph.groups.retry_rejected) keeps, on
+    the marginal of the factors `known` at `values`: all of them in, LM, then TLS descent over them (module doc;
+    the known factors are held at their linearisation, where the whole-graph re-try may drop kept loops)."""
+    if not loops:
+        return np.zeros(0, bool)
+    base, small = marginal_problem(known, values, loops, dim)
+    with direct():
+        g = graph_of(base + loops)
+        v = gtsam.LevenbergMarquardtOptimizer(g, small, lm_params(params, graph=g)).optimize()
+        _, kept, _ = tls_descent(base, _Loops(loops), v, c2, params, params.robust.kernel_descent_rounds)
     return kept

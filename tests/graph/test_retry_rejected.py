@@ -10,9 +10,9 @@ from tests.graph.synth import ate
 from tests.graph.test_false_groups import _grouped
 
 
-def _retry(kept_false: bool, kept_true: bool, budget: int = 3):
+def _retry(kept_false: bool, kept_true: bool, budget: int = 3, forecast: bool = True):
     data, truth, false, _ = _grouped(2, 30, 4, 1, 0)
-    p = GraphParams().replace(robust={"retry_clusters": budget})
+    p = GraphParams().replace(robust={"retry_clusters": budget, "retry_forecast": forecast})
     cs, c2 = _prepare(data, p)
     inlier = (false & kept_false) | (~false & kept_true & cs.cand)
     values, _ = cs.lm(cs.built.graph(inlier), cs.odometry_values, p.solver.lm_max_iterations)
@@ -38,3 +38,13 @@ def test_off_changes_nothing():
     false, _, inlier, new, (before, after) = _retry(kept_false=False, kept_true=False, budget=0)
     assert np.array_equal(new, inlier)
     assert after == before
+
+
+def test_the_forecast_on_the_marginal_keeps_the_outcome():
+    # retry_forecast skips the whole-graph re-try of a cluster none of whose loops survives it on the marginal of
+    # the solved map: the true revisit still comes back, the false group still stays out, as without the forecast
+    for kept_true in (False, True):
+        on = _retry(kept_false=False, kept_true=kept_true)
+        off = _retry(kept_false=False, kept_true=kept_true, forecast=False)
+        assert np.array_equal(on[3], off[3])
+        assert abs(on[4][1] - off[4][1]) < 1e-6
