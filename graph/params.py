@@ -468,6 +468,12 @@ class RobustParams(Config):
                                     doc="at most this many Gauss-Newton steps with the kept loops after the robust "
                                         "solve, from its estimate (LM stops at its cost tolerance, which on a flat "
                                         "objective leaves the map far from the optimum: w10000 0.56 m); 0: off")
+    polish_backtracks: int = setting(
+        10, range="[0, inf)", unit="halvings",
+        doc="a polish step that raises the cost is halved up to this many times before the polish stops (a step "
+            "scaled by 2^-10 that still raises the cost is no descent direction worth taking); 0: the first "
+            "such step ends the polish (w10000 at 50 % random-grouped, seed 1: every label right, the undamped "
+            "first step raised the cost, the map stayed 0.67 m from the optimum); graph.polish")
     polish_step_tol: float = setting(1e-5, range="[0, inf)", unit="x map extent",
                                      doc="the polish stops after a step that moves no node by more than this x the "
                                          "largest side of the map's bounding box (at 1e-3 garage stopped 0.22 mm "

@@ -52,16 +52,28 @@ def test_polish_at_the_optimum_stops_after_one_small_step():
     assert np.abs(array_from_values(2, values, data.num_nodes)[:, :2] - ref[:, :2]).max() < 1e-6
 
 
-def test_polish_refuses_a_step_that_raises_the_cost():
-    # far from the optimum (headings off by up to 3 rad) undamped steps overshoot after a few good ones: the polish
-    # stops there and keeps the last estimate that lowered the cost
+def _far_start():
+    # far from the optimum (headings off by up to 3 rad) undamped steps overshoot after a few good ones
     data, truth = _graph()
     graph = build(data, GraphParams.preset("least_squares")).graph()
     start = truth.copy()
     start[:, 2] += np.random.default_rng(0).uniform(-3.0, 3.0, len(start))
-    v0 = values_from_array(2, start)
-    values, steps, why = polish(graph, v0, 2, GraphParams())
+    return graph, values_from_array(2, start)
+
+
+def test_polish_without_backtracking_refuses_a_step_that_raises_the_cost():
+    # polish_backtracks 0: the polish stops at the first such step and keeps the last estimate that lowered the cost
+    graph, v0 = _far_start()
+    values, steps, why = polish(graph, v0, 2, GraphParams().replace(robust={"polish_backtracks": 0}))
     assert why == "a step raised the cost"
     assert graph.error(values) < graph.error(v0)
     lin = graph.linearize(values).optimize()
     assert graph.error(values.retract(lin)) > graph.error(values)      # the refused step
+
+
+def test_backtracking_goes_on_where_the_full_step_overshoots():
+    # halving the overshooting step lowers the cost further than stopping there; the cost never rises
+    graph, v0 = _far_start()
+    stopped, _, _ = polish(graph, v0, 2, GraphParams().replace(robust={"polish_backtracks": 0}))
+    values, steps, _ = polish(graph, v0, 2, GraphParams())
+    assert graph.error(values) < graph.error(stopped) < graph.error(v0)
