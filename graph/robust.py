@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Callable
 
 import gtsam
@@ -95,6 +96,18 @@ class ConsensusProblem:
     @property
     def loops(self) -> int:
         return len(self.built.loops)
+
+    @cached_property
+    def loop_ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """Node indices of each loop's two ends, in loop order."""
+        idx = self.built.loop_idx
+        return self.built.a[idx], self.built.b[idx]
+
+    @cached_property
+    def short(self) -> np.ndarray:
+        """Per loop: whether it spans at most the short span (graph.thresholds.short_span)."""
+        a, b = self.loop_ends
+        return short_span(np.abs(a - b), self.params.robust.support_window)
 
     def ready(self) -> None:
         """Make the deferred starts."""
@@ -337,10 +350,7 @@ def _gnc_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best, confident_aft
 
 def _long_rejected(cs: ConsensusProblem, inlier: np.ndarray) -> bool:
     """Whether some candidate rejected in `inlier` spans more than the short span (graph.thresholds.short_span)."""
-    a, b = cs.data.edge_index_pairs()
-    idx = cs.built.loop_idx
-    short = short_span(np.abs(a[idx] - b[idx]), cs.params.robust.support_window)
-    return bool(np.any(cs.cand & ~inlier & ~short))
+    return bool(np.any(cs.cand & ~inlier & ~cs.short))
 
 
 def _try_unsupported(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray
@@ -471,9 +481,7 @@ def _short_tail(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, 
                 ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """(thresholds with the tail margin (graph.thresholds.tail_margin) of the kept loops at `values` on the
     short-span loops (graph.thresholds.short_span), the others as `c2`; the margin; the short-span mask; r^2)."""
-    a, b = cs.data.edge_index_pairs()
-    idx = cs.built.loop_idx
-    short = short_span(np.abs(a[idx] - b[idx]), cs.params.robust.support_window)
+    short = cs.short
     r2 = cs.built.r2(values)
     margin = tail_margin(r2[inlier], cs.sigma0, TANGENT_DIM[cs.data.dim], cs.params)
     return np.where(short, c2 * (margin * cs.sigma0 / cs.scale), c2), margin, short, r2
@@ -536,9 +544,9 @@ def _family_tight(cs: ConsensusProblem, r2: np.ndarray, inlier: np.ndarray, shor
     unit = cs.sigma0
     if not inlier.any() or heavy_tailed(r2[inlier] / unit, dof, prob):
         return tight, margin
-    bound = family_bound(int(inlier.sum()), dof, prob) * unit
-    out = np.where(short, np.minimum(tight, bound), tight)
-    return out, min(margin, family_bound(int(inlier.sum()), dof, prob) / base_threshold(dof, cs.params))
+    bound = family_bound(int(inlier.sum()), dof, prob)
+    out = np.where(short, np.minimum(tight, bound * unit), tight)
+    return out, min(margin, bound / base_threshold(dof, cs.params))
 
 
 def _screen_short(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, judged: np.ndarray,
@@ -562,8 +570,7 @@ def _screen_short(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray
     window = cs.params.robust.support_window
     component = revisits(cs.data, window, lost)
     back = 0
-    a, b = cs.data.edge_index_pairs()
-    ends_a, ends_b = a[cs.built.loop_idx], b[cs.built.loop_idx]
+    ends_a, ends_b = cs.loop_ends
     for g in np.unique(component[lost]).tolist():
         member = component == g
         # a short-span revisit moves only its own stretch and neighbourhood (graph.local_solve): the rest is held
