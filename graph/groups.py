@@ -112,8 +112,7 @@ def drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFac
         groups = groups[counts[counts >= 2] * 2 <= int(inlier.sum())]
     if not len(groups):
         return values, inlier, 0
-    r2 = built.r2(values)
-    ratio = np.array([r2[component == g].sum() / c2[component == g].sum() for g in groups.tolist()])
+    ratio = _cluster_ratio(built.r2(values), c2, component, groups)
     order = groups[np.argsort(-ratio, kind="stable")]
     doubt = np.zeros(len(order), bool)
     if starts is not None and len(starts) >= 2:
@@ -170,6 +169,12 @@ def drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFac
     return values, inlier, iters
 
 
+def _cluster_ratio(r2: np.ndarray, c2: np.ndarray, component: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """Per cluster label in `groups`: its loops' summed r^2 over their summed thresholds (the order in which the
+    group test and the re-try take clusters)."""
+    return np.array([r2[component == g].sum() / c2[component == g].sum() for g in groups.tolist()])
+
+
 def group_objective(base_graph: gtsam.NonlinearFactorGraph, built: BuiltGraph, values: gtsam.Values,
                     c2: np.ndarray, groups: list[tuple[np.ndarray, float]]) -> float:
     """The TLS objective (graph.tls.tls_objective) with each of `groups` (loop mask, group threshold) charged as one
@@ -207,15 +212,15 @@ def retry_rejected(data: PoseGraphData, built: BuiltGraph, base_graph: gtsam.Non
     whole = labels[(counts >= 2) & ~np.isin(labels, kept_labels)]
     if not len(whole):
         return values, inlier, 0
-    r2 = built.r2(values)
-    ratio = np.array([r2[component == g].sum() / c2[component == g].sum() for g in whole.tolist()])
+    ratio = _cluster_ratio(built.r2(values), c2, component, whole)
     order = whole[np.argsort(ratio, kind="stable")][:budget]
     dof = TANGENT_DIM[data.dim]
     prob = data.probability[built.loop_idx]
     base = built.priors + built.odometry
     iters = 0
     added = 0
-    known = base + [f for f, k in zip(built.loops, inlier.tolist()) if k]
+    # the forecast's known factors: the solution it is made on does not change until a re-try is kept
+    known = base + [f for f, k in zip(built.loops, inlier.tolist()) if k] if params.robust.retry_forecast else None
     skipped = 0
     for g in order.tolist():
         member = component == g
