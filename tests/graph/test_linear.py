@@ -26,12 +26,16 @@ def _long_range(seed: int = 5, extra: int = 60):
     return out, truth
 
 
+def _chain_and_far(n: int, far_count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Node pairs of an n-node chain, and up to `far_count` random long-range pairs (no self-pair)."""
+    chain = np.column_stack([np.arange(n - 1), np.arange(1, n)])
+    far = np.random.default_rng(seed).integers(0, n, (far_count, 2))
+    return chain, far[far[:, 0] != far[:, 1]]
+
+
 def test_fill_cost_grows_with_long_range_loops():
     n = 400
-    chain = np.column_stack([np.arange(n - 1), np.arange(1, n)])
-    rng = np.random.default_rng(0)
-    far = rng.integers(0, n, (200, 2))
-    far = far[far[:, 0] != far[:, 1]]
+    chain, far = _chain_and_far(n, 200, 0)
     c_chain = fill_cost(chain, 2)
     # a chain eliminates with one neighbour per node: ~ n x 27 x 2^2
     assert c_chain <= 27 * 4 * n
@@ -61,11 +65,7 @@ def test_iterative_solve_reaches_the_direct_optimum():
 
 
 def test_capped_fill_cost_is_exact_below_its_cap_and_above_it_once_passed():
-    n = 400
-    chain = np.column_stack([np.arange(n - 1), np.arange(1, n)])
-    rng = np.random.default_rng(1)
-    far = rng.integers(0, n, (300, 2))
-    far = far[far[:, 0] != far[:, 1]]
+    chain, far = _chain_and_far(400, 300, 1)
     for pairs in (chain, np.vstack([chain, far])):
         full = fill_cost(pairs, 2)
         assert fill_cost(pairs, 2, cap=2 * full) == full        # never passed: the whole elimination, same sum
