@@ -219,8 +219,11 @@ def retry_rejected(data: PoseGraphData, built: BuiltGraph, base_graph: gtsam.Non
     base = built.priors + built.odometry
     iters = 0
     added = 0
-    # the forecast's known factors: the solution it is made on does not change until a re-try is kept
-    known = base + [f for f, k in zip(built.loops, inlier.tolist()) if k] if params.robust.retry_forecast else None
+    def kept_factors(mask: np.ndarray) -> list | None:
+        # the forecast's known factors: the kept loops of the solution it is made on
+        return base + [f for f, k in zip(built.loops, mask.tolist()) if k] if params.robust.retry_forecast else None
+
+    known = kept_factors(inlier)
     skipped = 0
     for g in order.tolist():
         member = component == g
@@ -257,6 +260,7 @@ def retry_rejected(data: PoseGraphData, built: BuiltGraph, base_graph: gtsam.Non
             notes.append(f"retry: a rejected cluster of {int(member.sum())} loops back with {int((new & member).sum())}"
                          f" kept, {int(lost.sum())} kept loops out; objective {f0:.6g} -> {f:.6g}")
             values, inlier = v, new
+            known = kept_factors(inlier)
             added += 1
     notes.append(f"retry: {added} of {len(order)} tried clusters rejected whole kept ({len(whole)} such clusters; "
                  f"{skipped} dropped on the marginal of the solved map)")
