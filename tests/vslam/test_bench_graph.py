@@ -124,6 +124,25 @@ def test_a_crashed_peer_loses_its_row_only(tiny_shared, tmp_path, monkeypatch):
     assert {r["status"] for k, r in rows.items() if k[4] == "ours"} == {"ok"}
 
 
+def test_a_peer_past_its_timeout_loses_its_row_only_and_one_within_it_gives_the_same_row(tiny_shared, tmp_path):
+    def bench(out, timeout):
+        assert main(["bench", "graph", "--no-docs", "--datasets", "ring", "--fractions", "0.3", "--policies",
+                     "random", "--seeds", "1", "--methods", "ours,plain-lm", "--out", str(out),
+                     "--peer-timeout", timeout]) == 0
+        return _rows(out)
+    cut = bench(tmp_path / "cut" / "g.json", "0.01")       # a spawned child cannot even import numpy in 10 ms
+    lm = cut[("ring", "random", 0.3, 1, "plain-lm")]
+    assert lm["status"] == "timeout" and lm["timeout_s"] == 0.01
+    assert cut[("ring", "random", 0.3, 1, "ours")]["status"] == "ok"
+    assert "not finished in 0 s" in graph_tables.cell(graph_tables.aggregate([lm])[("ring", "random", 0.3,
+                                                                                      "plain-lm")], 0.3)
+    full = bench(tmp_path / "full" / "g.json", "600")
+    plain = bench(tmp_path / "plain" / "g.json", "0")
+    a, b = full[("ring", "random", 0.3, 1, "plain-lm")], plain[("ring", "random", 0.3, 1, "plain-lm")]
+    assert a["status"] == b["status"] == "ok"
+    assert a["ate"] == pytest.approx(b["ate"], abs=1e-9) and a["true_kept"] == b["true_kept"]
+
+
 def test_a_segfault_in_the_child_becomes_peer_crashed(tmp_path, monkeypatch):
     (tmp_path / "segv_child.py").write_text("import os, signal\nos.kill(os.getpid(), signal.SIGSEGV)\n")
     monkeypatch.setenv("PYTHONPATH", str(tmp_path) + os.pathsep + os.environ.get("PYTHONPATH", ""))

@@ -53,6 +53,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run " + ", ".join(graph_methods.PEERS_LIMITED) + " on contaminated graphs only up to this "
                         "many nodes (gtsam's GNC restarts every inner solve, g2o's LM with DCS rejects most steps: "
                         "minutes per row on 10^4 nodes)")
+    p.add_argument("--peer-timeout", type=float, default=0.0, metavar="SECONDS",
+                   help="stop a row of " + ", ".join(graph_methods.PEERS_LIMITED) + " after this many seconds and "
+                        "report it as a timeout (0: no limit; needs --jobs 1)")
     p.add_argument("--from-json", help="comma-separated JSON files of earlier runs: print (and publish) their tables "
                                        "together instead of solving (later files win on the same row)")
     p.add_argument("--out", default="bench-results/graph.json",
@@ -149,7 +152,7 @@ def run(args: argparse.Namespace) -> BenchResult:
                 f"{r['s']:.2f} s") if r["status"] == "ok" else f"{r['status']}: {r.get('error', '')}"
         log(f"  {r['graph']:10s} {r['policy']:14s} {f:3d} % seed {r['seed']} {r['method']:10s} {what}")
 
-    execute(todo, ref_dir, args.jobs, on_row)
+    execute(todo, ref_dir, args.jobs, on_row, args.peer_timeout)
     total = time.perf_counter() - t0
     rows = [r for r in store.rows.values() if r["graph"] in present]
     text = (f"Rows of {out.name} for {', '.join(present)} ({len(rows)} rows). " + _split_note() + "\n\n"

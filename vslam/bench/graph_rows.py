@@ -182,9 +182,11 @@ def head(name: str, ref_dir: str | None) -> dict:
             "clean_s": plain.seconds, "note": ds.note}
 
 
-def run_task(task: Task, ref_dir: str | None, jobs: int = 1) -> dict:
+def run_task(task: Task, ref_dir: str | None, jobs: int = 1, peer_timeout: float = 0.0) -> dict:
     """One row: the method on the graph with the task's false loops. A crashed peer or a failing method gives a
-    row with status "crashed" / "failed" and the reason, never an exception (the run goes on)."""
+    row with status "crashed" / "failed" and the reason, never an exception (the run goes on); a peer of
+    `graph_methods.PEERS_LIMITED` still running after `peer_timeout` seconds (0: no limit) is stopped and its row
+    has status "timeout"."""
     data, gt, ref = _graph(task.graph, ref_dir)
     dd, false = add_false_loops(data, task.policy, task.fraction, task.seed) if task.fraction > 0 else \
         (data, np.zeros(data.num_loops, bool))
@@ -193,7 +195,12 @@ def run_task(task: Task, ref_dir: str | None, jobs: int = 1) -> dict:
            "tuning": task.graph in TUNING_GRAPHS and task.seed in TUNING_SEEDS,
            "version": code_version(), "commit": git_commit(), "jobs": jobs}
     try:
-        run = graph_methods.METHODS[task.method](dd)
+        if peer_timeout and task.method in graph_methods.PEERS_LIMITED:
+            run = _run_with_timeout(task.method, dd, peer_timeout)
+        else:
+            run = graph_methods.METHODS[task.method](dd)
+    except PeerTimeout as e:
+        return {**row, "status": "timeout", "timeout_s": float(peer_timeout), "error": str(e)}
     except PeerCrashed as e:
         return {**row, "status": "crashed", "error": str(e)}
     except Exception as e:          # noqa: BLE001 - one failing row must not end a run of hours
@@ -211,17 +218,55 @@ def run_task(task: Task, ref_dir: str | None, jobs: int = 1) -> dict:
     return out
 
 
+class PeerTimeout(RuntimeError):
+    """A peer did not finish within the run's --peer-timeout: its row says so, the run goes on."""
+
+
+def _peer_child(method: str, data, conn) -> None:
+    try:
+        run = graph_methods.METHODS[method](data)
+        conn.send(("ok", (run.poses, run.kept, run.seconds)))
+    except Exception as e:          # noqa: BLE001 - reported by the parent as the row's failure
+        conn.send(("failed", f"{type(e).__name__}: {e}"))
+
+
+def _run_with_timeout(method: str, data, seconds: float) -> graph_methods.MethodRun:
+    """The peer in a spawned child, stopped after `seconds` (gtsam's GNC has no time limit of its own and ran over
+    30 minutes on parking-garage at 50 % random false loops; the process is the unit that can be stopped)."""
+    ctx = multiprocessing.get_context("spawn")
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_peer_child, args=(method, data, child))
+    proc.start()
+    child.close()
+    try:
+        if not parent.poll(seconds):
+            raise PeerTimeout(f"{method} did not finish in {seconds:.0f} s")
+        status, payload = parent.recv()
+    except EOFError as e:
+        raise PeerCrashed(f"{method} child died (exit code {proc.exitcode})") from e
+    finally:
+        if proc.is_alive():
+            proc.kill()
+        proc.join()
+    if status != "ok":
+        raise RuntimeError(payload)
+    return graph_methods.MethodRun(*payload)
+
+
 def _run_star(args) -> dict:
     return run_task(*args)
 
 
-def execute(tasks: list[Task], ref_dir: str | None, jobs: int, on_row: Callable[[dict], None]) -> None:
+def execute(tasks: list[Task], ref_dir: str | None, jobs: int, on_row: Callable[[dict], None],
+            peer_timeout: float = 0.0) -> None:
     """Run `tasks` (in order with one job, else in `jobs` spawned processes) and hand each row to `on_row` as it
-    finishes."""
+    finishes. `peer_timeout` (seconds, 0: none) needs one job: pool workers cannot start the peer's child."""
     if jobs <= 1:
         for t in tasks:
-            on_row(run_task(t, ref_dir, 1))
+            on_row(run_task(t, ref_dir, 1, peer_timeout))
         return
+    if peer_timeout:
+        raise ValueError("--peer-timeout runs each peer in a child process and needs --jobs 1")
     ctx = multiprocessing.get_context("spawn")      # no fork after gtsam's threads started
     with ctx.Pool(jobs) as pool:
         for row in _unordered(pool, [(t, ref_dir, jobs) for t in tasks]):

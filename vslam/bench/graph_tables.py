@@ -31,6 +31,10 @@ ROBUST_PEERS = ("gtsam-gnc", "dcs", "g2o-dcs")
 STRETCH = 0.6              # fractions above this are stretch rows
 
 
+def _bad(r: dict) -> str:
+    return f"not finished in {r['timeout_s']:.0f} s" if r["status"] == "timeout" else r["status"]
+
+
 def aggregate(rows: list[dict], version: str | None = None) -> dict[tuple, dict]:
     """(graph, policy, fraction, method) -> worst over seeds; crashed / failed rows counted, not averaged."""
     groups: dict[tuple, list[dict]] = {}
@@ -40,7 +44,7 @@ def aggregate(rows: list[dict], version: str | None = None) -> dict[tuple, dict]
     for k, rs in groups.items():
         ok = [r for r in rs if r.get("status", "ok") == "ok"]
         a = {"seeds": sorted(int(r["seed"]) for r in rs), "n_ok": len(ok), "n": len(rs),
-             "bad": sorted({r["status"] for r in rs if r.get("status", "ok") != "ok"}),
+             "bad": sorted({_bad(r) for r in rs if r.get("status", "ok") != "ok"}),
              "tuning": any(r.get("tuning") for r in rs),
              "stale": version is not None and any(r.get("version") not in (None, version) for r in rs)}
         if ok:
