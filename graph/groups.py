@@ -75,8 +75,7 @@ def _joint_screen(built: BuiltGraph, values: gtsam.Values, inlier: np.ndarray, c
 
 def drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                        inlier: np.ndarray, c2: np.ndarray, scale: float, init: InitMethod, params: GraphParams,
-                       notes: list[str], start_built: BuiltGraph | None = None,
-                       starts: list[np.ndarray] | None = None) -> tuple[gtsam.Values, np.ndarray, int]:
+                       notes: list[str], start_built: BuiltGraph | None = None) -> tuple[gtsam.Values, np.ndarray, int]:
     """The group-level test: each kept revisit cluster (graph.support.revisits) is one hypothesis in the TLS
     objective, truncated at its group threshold (`group_threshold`); a cluster is dropped when the map solved
     without it has the lower objective.
@@ -92,8 +91,6 @@ def drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFac
     tested cluster (the `group_tests` whose loops sit nearest their thresholds) screens with a few warm LM
     iterations; full warm and LAGO / chordal re-solves only for a cluster whose loops no longer fit without it.
     `start_built`: the graph whose LAGO / chordal guess starts those re-solves (default `built`).
-    `starts`: the loops each start of the decision kept; a kept cluster some start rejected whole is tested too,
-    beyond the budget (`group_disputed`).
     """
     iters = 0
     budget = params.robust.group_tests
@@ -103,29 +100,10 @@ def drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFac
     component = revisits(data, params.robust.support_window, inlier)
     labels, counts = np.unique(component[inlier], return_counts=True)
     groups = labels[counts >= 2]                # a lone loop is GNC's to judge, one weight each
-    if params.robust.group_skip_majority:
-        # a cluster holding most of the kept loops is the map, not one claim among others: without it the odometry
-        # relaxes by all the redundancy the loops gave, so the test weighs the whole graph's residual against the
-        # chi-square quantile of n x dof, ~3 % above its mean at 10^4 dof, i.e. tests the variance factor, not the
-        # claim (sphere2500 random 50 %, seed 3: all 2451 kept loops one cluster, 0.99x that quantile with the
-        # factor 3 % lower, dropped whole: 23.3 m)
-        groups = groups[counts[counts >= 2] * 2 <= int(inlier.sum())]
     if not len(groups):
         return values, inlier, 0
     ratio = _cluster_ratio(built.r2(values), c2, component, groups)
-    order = groups[np.argsort(-ratio, kind="stable")]
-    doubt = np.zeros(len(order), bool)
-    if starts is not None and len(starts) >= 2:
-        # a claim one start's map holds and another's rejects whole is in doubt however well it fits where it won:
-        # a false group fits the stretch it bent at 0.02-0.1x its threshold and ranks behind the budget (manhattan
-        # random-grouped 10 %, seed 1: 1845.. -> 2508.., 11th). A cluster the starts split loop by loop (a true
-        # revisit with a strained loop or two) is no such sign
-        for k in starts:
-            doubt |= ~np.isin(order, component[inlier & k])
-        doubt[:budget] = False
-        if doubt.any():
-            notes.append(f"group test: {int(doubt.sum())} clusters beyond the budget, rejected whole by a start")
-    order = np.concatenate([order[:budget], order[doubt]])
+    order = groups[np.argsort(-ratio, kind="stable")][:budget]
     prob = data.probability[built.loop_idx]
     odometry_factor = odometry_variance(built, values, dof) if params.robust.group_margin_once else 0.0
     dropped = 0

@@ -7,7 +7,8 @@
 
 `GraphParams` composes the three. A scalar where a group is expected sets the group's method, so
 `GraphParams(robust="huber")`, `params.replace(solver="isam2")` and `--set graph.robust=none` keep working; the
-settings that used to sit flat in `GraphParams` are a ConfigError naming their new key.
+settings that used to sit flat in `GraphParams` are a ConfigError naming their new key, and a removed setting
+(`RobustParams.REMOVED`: off-by-default mechanisms measured not worth turning on) a ConfigError saying why it went.
 Enums carry the values used on the command line (`--robust gnc|huber|cauchy|none`, `--solver lm|isam2`).
 """
 from __future__ import annotations
@@ -103,6 +104,37 @@ class SolverParams(Config):
     #                                      manhattan): then iSAM2 is rebuilt with QR
 
 
+_SEE = "; see docs/graph.md"
+# settings of consensus-mode mechanisms that were off by default and measured not worth turning on: naming one is a
+# ConfigError saying why it went (docs/graph.md keeps each measurement)
+_REMOVED = {
+    "support_propagate": "off by default, measured worse: the propagated 3D cycle covariance rejected 38 true loops "
+                         "of clean parking-garage (3 summed); the split calibration (calibration_split, "
+                         "calibration_propagate) propagates instead" + _SEE,
+    "reach_tail": "off by default, measured worse on manhattan local 50 % seed 3 (4.2 -> 4.7 cm from the clean "
+                  "optimum); short spans are judged at the tail margin by short_tail_screen and readmit_short_tail"
+                  + _SEE,
+    "data_snooping": "off by default, measured worse: it lost a true loop on manhattan local-grouped 50 % seed 2 and "
+                     "did not refuse w10000's wrong loop" + _SEE,
+    "snooping_min_redundancy": "a setting of data_snooping, which was removed (off by default, measured worse)" + _SEE,
+    "snooping_max_loops": "a setting of data_snooping, which was removed (off by default, measured worse)" + _SEE,
+    "trial_map_covariance": "off by default, measured worse: it did not refuse w10000's wrong loop and kept one more "
+                            "wrong loop on sphere2500 50 % random seed 1" + _SEE,
+    "group_disputed": "off by default, measured worse on 3 of 6 ringCity random-grouped rows (50 % seed 1: 0.949 -> "
+                      "7.32 m)" + _SEE,
+    "group_skip_majority": "off by default, measured not worth turning on: no row changed with it at the default "
+                           "calibration_propagate (48 rows), and the row it was made for passes without it" + _SEE,
+    "cluster_weights": "off by default since the consensus method came in, never the better choice: the group test "
+                       "(group_tests) judges a cluster as one claim" + _SEE,
+    "kernel_start_always": "off by default, measured not worth turning on: where the two GNC starts agreed the "
+                           "DCS-kernel start never won, and it is the costliest start" + _SEE,
+    "consensus_isam2_steps": "off by default, measured worse: sphere2500 slower (local 50 % 17.6 -> 28.1 s); the "
+                             "re-admission's iSAM2 steps are readmit_isam2_steps" + _SEE,
+    "consensus_isam2_updates": "one iSAM2 update per GNC step: a second one re-linearised nearly every pose and cost "
+                               "about one LM iteration" + _SEE,
+}
+
+
 @dataclass(frozen=True)
 class RobustParams(Config):
     """How loop closures are protected against false positives (odometry is always trusted), and the tunables of
@@ -120,6 +152,9 @@ class RobustParams(Config):
         # no robust handling: every loop is trusted
         "none": {"method": "none"},
     }
+    REMOVED = _REMOVED
+    MOVED = {"consensus_isam2_relinearize": "readmit_isam2_relinearize",
+             "consensus_isam2_max_changed": "readmit_isam2_max_changed"}
 
     method: RobustMode = RobustMode.CONSENSUS
     inlier_probability: float = setting(0.99, range="(0.5, 1)",
@@ -143,7 +178,8 @@ class RobustParams(Config):
     #                                      kept loops (public graphs state information 10-1000x too loose)
     fence_factor: float = setting(10.0, range="[0, inf)",
                                   doc="an inlier's r^2 is within this many times the kept loops' q-quantile (the "
-                                      "gate's settling rounds; consensus: the short-span margin of reach_tail) ...")
+                                      "gate's settling rounds; consensus: the short-span tail margin, graph.thresholds.tail_"
+                                      "margin) ...")
     fence_quantile: float = setting(0.9, range="[0, 1]", doc="... (heavy tails: a high quantile, not the median)")
     isolation_window: int = setting(5, range="[0, inf)")   # kept loops with no other kept loop within this many
     #                                      nodes at both ends get the standardized-residual test in those rounds
@@ -157,11 +193,6 @@ class RobustParams(Config):
                                       "over the short odometry cycle between them (graph.support); 0: off")
     support_probability: float = setting(0.99, range="(0, 1)", unit="probability",
                                          doc="chi-square quantile of that cycle test")
-    support_propagate: bool = setting(False, unit="flag",
-                                      doc="3D cycle test: propagate the measurements' covariances through the cycle "
-                                          "(rotation noise x lever arm) instead of summing them; fixes sphere2500 "
-                                          "local 50 % (0.93 -> 0.21 m) but rejects 38 true loops of clean garage "
-                                          "(3 summed), so off by default (docs/graph.md, issue 14)")
     calibration_margin: float = setting(10.0, range="[0, inf)", unit="x variance factor",
                                         doc="loop thresholds = chi-square quantile x this x the variance factor of "
                                             "the agreeing cycles (graph.support; public graphs state noise 10-1000x "
@@ -194,14 +225,6 @@ class RobustParams(Config):
             "on a graph stating its noise ~400x too loose lets short false loops agree with true ones (w10000 50 % "
             "local / local-grouped: 44-48 % of the agreeing pairs hold a false loop, factor 3.4-4.3x the clean "
             "graph's; it converges in 2-3 rounds, 5 is a cap); 0 = one estimate (graph.calibration.refined_factor)")
-    reach_tail: bool = setting(False, unit="flag",
-                               doc="after the decision, loops at most 2 x support_window steps apart (the span of the "
-                                   "agreeing cycles, where no map strain excuses a misfit) are judged at "
-                                   "fence_factor x the fence_quantile of the kept loops' r^2 (as a margin on the "
-                                   "variance factor, within [1, calibration_margin]) instead of calibration_margin, "
-                                   "and the loops are decided again with the first decision as one more start: false "
-                                   "loops a few steps apart fit the global margin (manhattan local 50 %); "
-                                   "graph.robust, docs/graph.md")
     own_cycle_test: bool = setting(True, unit="flag",
                                    doc="after the decision, a kept loop at most support_window steps apart is "
                                        "dropped when the cycle it closes with the odometry between its ends is worse "
@@ -217,11 +240,11 @@ class RobustParams(Config):
         True, unit="flag",
         doc="the re-admission of rejected loops that agree with a kept loop (graph.readmit) judges loops at most "
             "2 x support_window steps apart at the kept loops' own tail margin (fence_factor x their "
-            "fence_quantile of r^2, as in reach_tail) instead of calibration_margin: over a short span no drift "
+            "fence_quantile of r^2, graph.thresholds.tail_margin) instead of calibration_margin: over a short "
+            "span no drift "
             "strain excuses a misfit, and false loops beside a true revisit agree with it and fit the global "
             "margin once back (manhattan local 50 %, seeds 1-3: every loop re-admitted was such a loop; intel's "
-            "true re-admitted loops span 620-1272 steps); with reach_tail on it defers to it (the whole decision is "
-            "then taken again at those thresholds); docs/graph.md")
+            "true re-admitted loops span 620-1272 steps); docs/graph.md")
     short_tail_screen: bool = setting(
         True, unit="flag",
         doc="at the end of the decision, the kept loops at most 2 x support_window steps apart are left out at once, "
@@ -239,31 +262,9 @@ class RobustParams(Config):
         True, unit="flag",
         doc="the short-tail screen judges the short-span loops at the family-wise chi-square bound of the n kept "
             "loops (chi-square^-1(1 - (1 - inlier_probability) / n) x the variance factor) where that is tighter than "
-            "the tail margin and the kept loops follow the calibrated model (as data_snooping's tail check): the tail "
+            "the tail margin and the kept loops follow the calibrated model (graph.thresholds.heavy_tailed): the tail "
             "margin must hold the heaviest true tail of any graph, and lets injected loops stating the truth only "
             "roughly stay (w10000 at 50 % local: 224 kept, 0.3 m claims between poses 2 cm apart); docs/graph.md")
-    data_snooping: bool = setting(
-        False, unit="flag",
-        doc="before the final polish, each kept loop's studentized residual (its residual at the map without it, the "
-            "map's uncertainty between its ends added; over the variance factor) is tested against the family-wise "
-            "chi-square bound of inlier_probability over the n kept loops (Pope's tau test), and the loops beyond it "
-            "leave; only where at most 1 - inlier_probability of the kept loops lie above the calibrated chi-square "
-            "quantile (no heavier tail than the model: intel, CSAIL, garage are skipped): w10000 at 50 % random "
-            "keeps injected loops at up to 9.8x the calibrated quantile, its true loops reach 1.02x; graph.snooping, "
-            "docs/graph.md")
-    snooping_min_redundancy: float = setting(
-        0.05, range="(0, 1]", unit="share of a loop's residual",
-        doc="data snooping judges only loops whose redundancy 1 - h (h: the largest eigenvalue of the loop's "
-            "leverage J S J^T) is at least this: below it the map holds the loop's residual almost only through the "
-            "loop, the test has no power, and its studentized residual is ill-conditioned; it also bounds which "
-            "loops need a joint marginal at all (r^2 above the bound x this), since every loop's costs minutes on "
-            "10^4-node graphs")
-    snooping_max_loops: int = setting(
-        50, range="[0, inf)", unit="loops",
-        doc="data snooping judges at most this many loops per round, the largest r^2 first (0: no cap): each needs a "
-            "joint marginal, and uncapped it cost ~100 s on w10000 clean (9.5 s without the test); the loops it is "
-            "for sit above every true loop (w10000 50 % random: every injected loop kept above the largest true "
-            "loop's r^2)")
     readmit_rounds: int = setting(3, range="[0, inf)", unit="solves",
                                   doc="after the robust solve, admit the loops that fit at the solution and re-solve, "
                                       "at most this many times")
@@ -282,15 +283,29 @@ class RobustParams(Config):
     readmit_isam2_steps: bool = setting(
         True, unit="flag",
         doc="on planar graphs, the GNC of the re-admission (graph.readmit: the kept loops known inliers, at most "
-            "`readmit_max_loops` candidates re-weighted) takes its steps by iSAM2 as `consensus_isam2_steps` does "
-            "(w10000 at 50 % random: 12 steps, ~0.65 s each by LM under load, ~0.3 s by iSAM2); 3D graphs keep "
-            "LM (iSAM2 over Pose3 re-linearises more: sphere2500 was slower); docs/graph.md")
+            "`readmit_max_loops` candidates re-weighted) takes its steps by iSAM2 updates that remove and re-add "
+            "only the loops whose weight changed (graph.tls): gtsam's LM re-linearises and re-factors the whole "
+            "graph for each step, iSAM2 only the cliques the changed loops and the moved poses touch (w10000 at "
+            "50 % random: 12 steps, ~0.65 s each by LM under load, ~0.3 s by iSAM2); only where the step's graph is "
+            "solved directly (graph.linear: iSAM2 has no iterative solver). 3D graphs keep LM (iSAM2 over Pose3 "
+            "re-linearises more: sphere2500 was slower); docs/graph.md")
     readmit_isam2_gauss_newton: bool = setting(
         True, unit="flag",
         doc="`readmit_isam2_steps` by Gauss-Newton (full back-substitution) instead of Powell's dogleg: the kept "
             "loops are fixed and only the candidates re-weighted, and dogleg's step evaluates the whole graph's "
-            "error (~0.2 s of a ~0.3 s step on w10000); the consensus GNC keeps dogleg (Gauss-Newton steps took "
-            "ring at 50 % random-grouped to other labels there); docs/graph.md")
+            "error (~0.2 s of a ~0.3 s step on w10000); dogleg where the other weights move too (Gauss-Newton "
+            "steps of the consensus GNC took ring at 50 % random-grouped to other labels); docs/graph.md")
+    readmit_isam2_relinearize: float = setting(
+        0.01, range="(0, inf)", unit="rad",
+        doc="iSAM2 relinearisation threshold of `readmit_isam2_steps` on a pose's rotation update (translations "
+            "never call for one: a between factor is linear in them at fixed rotations); gtsam's example 0.1 "
+            "tenfold tightened, since a label is decided on r^2 near its threshold")
+    readmit_isam2_max_changed: int = setting(
+        50, range="[0, inf)", unit="loops",
+        doc="`readmit_isam2_steps`: a GNC step that changes the weights of more loops than this is taken by LM "
+            "instead (iSAM2 would re-factor nearly the whole graph, in a worse ordering: 4.6 s for 3609 loops on "
+            "w10000 at 50 % random, against ~0.5 s by LM); 50 = `readmit_max_loops`, the candidates of the "
+            "re-admission's GNC")
     trial_forecast: bool = setting(
         True, unit="flag",
         doc="before the joint trial, run its GNC over the tried loops on the Gaussian marginal of the solved map on "
@@ -298,33 +313,11 @@ class RobustParams(Config):
             "keeps none of them the whole-graph trial (a GNC of ~13 whole-graph solves) is not run. The kept loops "
             "are held in that forecast, so a trial that would only push kept loops out is not run either "
             "(docs/graph.md)")
-    trial_map_covariance: bool = setting(
-        False, unit="flag",
-        doc="before the joint trial, judge each unsupported loop by its squared Mahalanobis distance with the marginal "
-            "covariance of the solved map between its two ends added to its noise, against its own threshold "
-            "(graph.trial); a loop that misses even the map's own uncertainty is not tried. Off: it does not refuse "
-            "the wrong loop it was made for (w10000 at 50 % random, 971 -> 8215: 59x its threshold plain, 0.30x "
-            "with the map's covariance, whose relative pose between nodes 7244 steps apart is ~1 m), and with the "
-            "2D noise split by translation and rotation it sits at 15.6 x chi-square(0.99) where intel's true lone "
-            "loops reach 12.3 x: no threshold not fitted to one graph separates them (docs/graph.md)")
     group_tests: int = setting(10, range="[0, inf)", unit="clusters",
                                doc="after GNC, re-solve without each of this many kept clusters of agreeing loops "
                                    "(those nearest their thresholds first) and drop a cluster whose absence lowers "
                                    "the TLS objective: a group of consistent false loops the map bent to fits "
                                    "loop by loop (graph.robust); 0: off")
-    group_disputed: bool = setting(
-        False, doc="the group test also tests, beyond `group_tests`, every kept cluster that one start of the "
-                   "decision (GNC or TLS descent) rejected whole: the starts' disagreement marks the claim as in "
-                   "doubt, while a false group that bent its stretch fits there far inside its threshold and ranks "
-                   "behind the budget (manhattan random-grouped 10 %, seed 1: 1845.. -> 2508.., 11th: 20.8 -> "
-                   "0.794 m). Off: on ringCity random-grouped 30 / 50 %, seeds 1 and 3, it drops true clusters "
-                   "tested while a false group still bends the map (50 % seed 1: 0.949 -> 7.32 m; docs/graph.md)")
-    group_skip_majority: bool = setting(
-        False, doc="the group test leaves out a cluster holding more than half of the kept loops: it is the map, not "
-                   "one claim among others, and dropping it tests the whole graph's residual against a chi-square "
-                   "quantile of ~10^4 dof, 3 % above its mean, i.e. the variance factor rather than the claim "
-                   "(sphere2500 random 50 %, seed 3, with 5000 calibration cycles: all 2451 kept loops dropped, "
-                   "23.3 m; docs/graph.md). Off: not yet measured on the whole table")
     retry_clusters: int = setting(3, range="[0, inf)", unit="clusters",
                                   doc="after the group test, re-try this many supported clusters rejected whole "
                                       "(those nearest their thresholds first): all back, LM, TLS descent over the "
@@ -363,7 +356,6 @@ class RobustParams(Config):
                   "for a false group that bent the supported start and the long loops it strains, truncated there; "
                   "with every long-range candidate kept none was strained (city10000 at 50 % local-grouped, seed 2: "
                   "17 GNC steps, 21 s of 167 s, to the same loops and TLS objective)")
-    cluster_weights: bool = setting(False, doc="one GNC weight per cluster of agreeing loops instead of per loop")
     kernel_start: bool = setting(True, doc="when some supported loop does not fit at the supported start, also start "
                                            "from a DCS-kernel solve from the odometry chain followed by TLS descent "
                                            "(graph.kernel_start); the lowest TLS objective wins")
@@ -371,11 +363,6 @@ class RobustParams(Config):
                                 doc="DCS kernel width of that start (Agarwal et al. 2013: 1) on r^2 in the loops' "
                                     "stated units times the variance factor of the agreeing cycles (public graphs "
                                     "state noise 10-1000x too loose)")
-    kernel_start_always: bool = setting(
-        False, doc="run the DCS-kernel start even when the supported and the odometry GNC starts kept the same loops "
-                   "(it exists for a surrogate bent by false groups, which leaves the two GNC starts in different "
-                   "minima; when they agree it never won on the rows measured, and it is the costliest start: a DCS "
-                   "solve to convergence, 36 % of city10000 at 50 % random false loops)")
     kernel_descent_rounds: int = setting(10, range="[1, inf)", unit="solves",
                                          doc="at most this many re-solves of its TLS descent (keep the loops that "
                                              "fit, re-solve, until the set is stable)")
@@ -519,31 +506,6 @@ class RobustParams(Config):
     consensus_inner_iterations: int = setting(2, range="[1, inf)", unit="LM iterations",
                                               doc="warm-started LM iterations per GNC outer step (consensus mode); "
                                                   "also caps the least-squares solve of the supported-loop start")
-    # h14-gnc: a GNC step of the consensus solve changes the weights of a few loops and moves the map by a warm
-    # step; gtsam's LM re-linearises and re-factors the whole graph for it (w10000: ~0.45 s a step, 25 steps in
-    # the trial and re-admission GNCs of 50 % random). iSAM2 re-factors only the cliques the changed loops and the
-    # moved poses touch (~0.015 s for 50 re-weighted loops at w10000's optimum). Only where the scope solves the
-    # step's graph directly (graph.linear): iSAM2 has no iterative solver
-    consensus_isam2_steps: bool = setting(
-        False, doc="take the warm GNC steps of the consensus solve (graph.tls.gnc_tls) by iSAM2 updates that "
-                   "remove and re-add only the loops whose weight changed, `consensus_inner_iterations` updates "
-                   "a step, then one LM solve of the final weights from its estimate (docs/graph.md)")
-    consensus_isam2_relinearize: float = setting(
-        0.01, range="(0, inf)", unit="rad",
-        doc="iSAM2 relinearisation threshold of `consensus_isam2_steps` on a pose's rotation update (translations "
-            "never call for one: a between factor is linear in them at fixed rotations); gtsam's example 0.1 "
-            "tenfold tightened, since a label is decided on r^2 near its threshold")
-    consensus_isam2_max_changed: int = setting(
-        50, range="[0, inf)", unit="loops",
-        doc="`consensus_isam2_steps`: a GNC step that changes the weights of more loops than this is taken by LM "
-            "instead (iSAM2 would re-factor nearly the whole graph, in a worse ordering: 4.6 s for 3609 loops on "
-            "w10000 at 50 % random, against ~0.5 s by LM); 50 = `readmit_max_loops`, the candidates of the "
-            "re-admission's GNC")
-    consensus_isam2_updates: int = setting(
-        1, range="[1, inf)", unit="iSAM2 updates",
-        doc="`consensus_isam2_steps`: iSAM2 updates per GNC step (each a dogleg step on the re-linearised "
-            "part); a second update re-linearises nearly every pose, since a step moves the whole map beyond "
-            "the threshold, and costs about one LM iteration")
     consensus_binary_converge: bool = setting(
         True, doc="once every GNC weight is binary (0 or 1), solve each further outer step to convergence instead "
                   "of `consensus_inner_iterations`: the steps left are then a TLS descent, and with a few warm "
@@ -590,6 +552,7 @@ class GraphParams(Config):
     accepted for enum fields."""
 
     MOVED = _MOVED
+    REMOVED = _REMOVED       # flat keys too: a removed robust setting is no unknown key at either level
     PRESETS = {
         # local consensus + GNC-TLS, LM batch; the choice measured in `vslam bench graph` (docs/graph.md)
         "default": {},

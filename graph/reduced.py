@@ -51,10 +51,10 @@ def reduced_gnc(known: list, values: gtsam.Values, loops: list, c2: np.ndarray, 
     if not loops:
         return np.zeros(0, bool)
     base, small = marginal_problem(known, values, loops, dim)
-    # a graph of a few hundred poses: direct, and by LM (iSAM2 steps would only add their start-up)
+    # a graph of a few hundred poses: direct, and by LM (gnc_tls's default; iSAM2 steps would only add their
+    # start-up)
     with direct():
-        _, kept, _, _ = gnc_tls(base, _Loops(loops), small, c2, np.arange(len(loops)),
-                                params.replace(robust={"consensus_isam2_steps": False}))
+        _, kept, _, _ = gnc_tls(base, _Loops(loops), small, c2, np.arange(len(loops)), params)
     return kept
 
 

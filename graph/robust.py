@@ -10,21 +10,17 @@
    candidate fills in (long-range groups of consistent false loops), the clusters are decided on a reduced graph
    instead of those GNC starts (graph.cluster_start).
 3. GNC with truncated least squares (Yang et al. 2020), odometry and anchor as known inliers, one weight per
-   cluster: a cluster's squared residual is the sum over its loops, its threshold the sum of their chi-square
-   thresholds. A group of mutually consistent false loops is thus one hypothesis that the rest of the map accepts
-   or rejects as a whole. Inner solves are warm-started (a few LM iterations per step).
+   loop. Inner solves are warm-started (a few LM iterations per step).
 4. polish with the kept loops; the group-level test (each kept revisit cluster one TLS term at the chi-square
-   quantile of its n x dof, dropped when the objective is lower without it; those nearest their thresholds, and with
-   `group_disputed` those some start rejected whole); then re-admit every rejected loop
-   that fits its own threshold at the solution.
+   quantile of its n x dof, dropped when the objective is lower without it, those nearest their thresholds first:
+   a group of mutually consistent false loops is one hypothesis the rest of the map accepts or rejects as a
+   whole); then re-admit every rejected loop that fits its own threshold at the solution.
    Then the short-tail screen (`_short_tail_screen`): the kept short-span loops are judged at the kept loops' tail
    margin on the map re-solved without them, where a false loop that bent its few steps of odometry no longer fits
    (at the family-wise bound of the kept loops instead where they follow the calibrated model; each dropped revisit
    offered back by a solve over its neighbourhood, graph.local_solve).
    Then the own-cycle test (graph.short_span): a kept loop between nodes a few steps apart whose cycle with the
    odometry between its ends is worse than the agreeing cycles of the kept loops is dropped.
-   Then, with `data_snooping` (off by default), the kept loops beyond the family-wise bound of their studentized
-   residuals where the kept loops follow the calibrated model (graph.snooping).
 5. once the loop set is decided, Gauss-Newton steps on the kept loops until the map stops moving (graph.polish):
    LM's cost tolerance stops far from the optimum on a flat objective (w10000: 0.56 m).
 
@@ -59,11 +55,9 @@ from graph.readmit import readmit_dropped, readmit_supported
 from graph.reduced import reduced_gnc
 from graph.result import GraphResult
 from graph.short_span import own_cycle_veto
-from graph.snooping import family_bound, heavy_tailed, snoop
-from graph.support import CycleSupport, clusters, cycle_support, revisits
-from graph.thresholds import base_threshold, loop_thresholds, short_span, tail_margin
+from graph.support import CycleSupport, cycle_support, revisits
+from graph.thresholds import base_threshold, family_bound, heavy_tailed, loop_thresholds, short_span, tail_margin
 from graph.tls import admit_fitting, gnc_tls, tls_objective
-from graph.trial import map_mahalanobis
 
 __all__ = ["ConsensusProblem", "decide", "group_threshold", "gnc_tls", "robust_solve", "tls_objective"]
 
@@ -75,7 +69,6 @@ class ConsensusProblem:
     stated: BuiltGraph          # the stated information: final polish and reported residuals
     built: BuiltGraph           # the information the loops are judged on (calibrated in 3D with the split)
     pairs: tuple                # agreeing loop pairs of the cycle test (graph.support)
-    label: np.ndarray           # cluster of each loop (one GNC weight each)
     cand: np.ndarray            # loops GNC judges: the supported ones (the rest go to the trial)
     odometry_values: gtsam.Values
     method: InitMethod          # the LAGO / chordal initialisation
@@ -131,7 +124,6 @@ def _prepare(data: PoseGraphData, params: GraphParams) -> tuple[ConsensusProblem
     split = params.robust.calibrate_noise and params.robust.calibration_split and data.dim == 3
     cycles = cycle_support(data, params.robust.support_window,
                            float(chi2.ppf(params.robust.support_probability, dof)),
-                           propagate=params.robust.support_propagate,
                            decompose=params.robust.calibration_propagate if split else 0)
     pairs = cycles.pairs
     calibrate = params.robust.calibrate_noise and len(pairs[2]) >= params.robust.calibration_min_loops
@@ -143,7 +135,6 @@ def _prepare(data: PoseGraphData, params: GraphParams) -> tuple[ConsensusProblem
     else:
         built = stated
     L = len(built.loops)
-    label = clusters(L, pairs[0], pairs[1]) if (L and params.robust.cluster_weights) else np.arange(L)
     supported = np.zeros(L, bool)
     supported[pairs[0]] = True
     supported[pairs[1]] = True
@@ -155,7 +146,7 @@ def _prepare(data: PoseGraphData, params: GraphParams) -> tuple[ConsensusProblem
     with narrow(lambda: built.pairs(cand)):
         # 2. starts: least squares on the supported loops from LAGO / chordal; the odometry chain
         odometry_values = values_from_array(data.dim, initial_guess(data, stated, InitMethod.ODOMETRY))
-        cs = ConsensusProblem(data, stated, built, pairs, label, cand, odometry_values, method, params, notes,
+        cs = ConsensusProblem(data, stated, built, pairs, cand, odometry_values, method, params, notes,
                               cycles=cycles, factors=factors)
 
     def supported_start() -> None:
@@ -205,7 +196,6 @@ class _Best:
     inlier: np.ndarray | None = None
     untouched: bool = False      # GNC took no step and kept every candidate: local consensus = global solution
     iterations: int = 0
-    kept: list[np.ndarray] = field(default_factory=list)     # the loops each start kept, in the order run
 
 
 def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values, best: _Best,
@@ -217,13 +207,11 @@ def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values
     if descent:
         values, kept, outer = tls_descent(cs.base, sub, v0, c2[cand], cs.params, cs.params.robust.kernel_descent_rounds)
     else:
-        _, sub_label = np.unique(cs.label[cand], return_inverse=True)
-        values, kept, outer, it = gnc_tls(cs.base, sub, v0, c2[cand], sub_label, cs.params)
+        values, kept, outer, it = gnc_tls(cs.base, sub, v0, c2[cand], np.arange(int(cand.sum())), cs.params)
         best.iterations += it
     inlier = np.zeros(cs.loops, bool)
     inlier[cand] = kept
     f = tls_objective(cs.base_graph, sub, values, c2[cand])
-    best.kept.append(inlier)
     cs.notes.append(f"start {name}: {'TLS descent' if descent else 'GNC'} {outer} steps, TLS objective {f:.6g}, "
                     f"{int(kept.sum())} loops kept")
     if best.values is None or f < best.objective:
@@ -232,7 +220,7 @@ def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values
     return inlier
 
 
-def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None) -> _Best:
+def _best_start(cs: ConsensusProblem, c2: np.ndarray) -> _Best:
     """Steps 2-3: GNC from each start, the lowest TLS objective wins."""
     best = _Best()
     # chance-supported random false loops bend every GNC start: first a TLS descent from the map of the confident
@@ -258,10 +246,6 @@ def _best_start(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None
         else:
             cs.ready()
             _gnc_starts(cs, c2, best, confident_after=not conf_first)
-    if extra is not None:
-        # the earlier decision, re-judged under these thresholds: the tightened test must not swap a start that
-        # won for one that lost (manhattan random-grouped 30 %, seed 3: 0.8 -> 24 m without it)
-        _run_start(cs, c2, "previous decision", extra, best, descent=True)
     return best
 
 
@@ -333,7 +317,7 @@ def _gnc_starts(cs: ConsensusProblem, c2: np.ndarray, best: _Best, confident_aft
             _run_start(cs, c2, "confident loops", cs.confident[1](), best, descent=True)
         return
     agree = first is not None and np.array_equal(first, _run_start(cs, c2, "odometry", cs.odometry_values, best))
-    if robust.kernel_start and (robust.kernel_start_always or not agree):
+    if robust.kernel_start and not agree:
         # groups of consistent false loops spread over the map bend GNC's convex surrogate itself, from either
         # start (manhattan random-grouped): a DCS solve from the odometry chain never forms it
         v0 = dcs_solve(cs.base, cs.built.subset(cs.cand).loops, cs.odometry_values,
@@ -368,14 +352,6 @@ def _try_unsupported(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndar
         trial = np.zeros(cs.loops, bool)
         trial[np.argsort(ratio, kind="stable")[:params.robust.trial_max_loops]] = True
         trial &= np.isfinite(ratio)
-    if trial.any() and params.robust.trial_map_covariance:
-        # a loop that misses its threshold even with the map's own uncertainty between its ends added is wrong, not
-        # strained by drift (graph.trial). Off by default: w10000's wrong loop (50 % random) is within that
-        # uncertainty (docs/graph.md)
-        idx = np.flatnonzero(trial)
-        fits = map_mahalanobis(built.graph(inlier), values, [built.loops[i] for i in idx]) <= c2[idx]
-        cs.notes.append(f"trial: {int(fits.sum())} of {len(idx)} unsupported loops fit the map's own uncertainty")
-        trial[idx[~fits]] = False
     if trial.any() and params.robust.trial_forecast:
         # the trial's GNC on the marginal of the solved map on the tried loops' ends (graph.reduced): when it keeps
         # none, the whole-graph GNC is not run (w10000 at 50 % random: ~13 whole-graph solves that keep none)
@@ -415,30 +391,25 @@ def _try_unsupported(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndar
 def _readmit_agreeing(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray
                       ) -> tuple[gtsam.Values, np.ndarray, int]:
     """A rejected loop that agrees with a kept one may fit only once it is in (graph.readmit). With
-    `readmit_short_tail` (and `reach_tail` off), short-span loops are judged there at the kept loops' own tail margin
-    (`_short_tail`)."""
+    `readmit_short_tail`, short-span loops are judged there at the kept loops' own tail margin (`_short_tail`)."""
     built = cs.built
     p = cs.params.robust
-    # with reach_tail the whole decision is taken again at those thresholds (its second pass passes them in here)
-    if p.readmit_short_tail and not p.reach_tail and cs.scale != 1.0:
+    if p.readmit_short_tail and cs.scale != 1.0:
         # the re-admission overturns a rejection on the strength of agreement alone; a false loop a few steps beside
         # a true revisit agrees with it and fits once in, within the global margin (manhattan local 50 %, seeds
         # 1-3: every loop it re-admitted, 0.2-0.4x the threshold, 1.3-2.4x at the tail margin). Over a short span
-        # no drift strain excuses a misfit (`_reach_tail`)
+        # no drift strain excuses a misfit
         c2 = _short_tail(cs, values, inlier, c2)[0]
 
     # its steps re-weight at most `readmit_max_loops` candidates against a fixed map: iSAM2's case (graph.tls)
-    judge_params = cs.params
-    gauss_newton = False
-    if p.readmit_isam2_steps and cs.data.dim == 2:
-        judge_params = cs.params.replace(robust={"consensus_isam2_steps": True})
-        gauss_newton = p.readmit_isam2_gauss_newton
+    isam2 = p.readmit_isam2_steps and cs.data.dim == 2
+    gauss_newton = isam2 and p.readmit_isam2_gauss_newton
 
     def judge(mask: np.ndarray, v0: gtsam.Values):
         # GNC over the candidates only; odometry, anchor and the kept loops are known inliers
         known = cs.base + [f for f, k in zip(built.loops, inlier.tolist()) if k]
-        v, ok, _, n = gnc_tls(known, built.subset(mask), v0, c2[mask], np.arange(int(mask.sum())), judge_params,
-                               gauss_newton, final_solve=False)
+        v, ok, _, n = gnc_tls(known, built.subset(mask), v0, c2[mask], np.arange(int(mask.sum())), cs.params,
+                               gauss_newton, final_solve=False, isam2_steps=isam2)
         out = np.zeros(cs.loops, bool)
         out[np.flatnonzero(mask)[ok]] = True
         return v, out, n
@@ -447,13 +418,11 @@ def _readmit_agreeing(cs: ConsensusProblem, values: gtsam.Values, inlier: np.nda
                              cs.lm, judge, cs.params, cs.notes)
 
 
-def decide(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None = None
-           ) -> tuple[gtsam.Values, np.ndarray, int, float]:
-    """Steps 2-4 with thresholds c2: (values, inlier, LM iterations, end of the GNC stage). `extra`: one more
-    start, taken by TLS descent (graph.kernel_start) and compared with the others by the TLS objective."""
+def decide(cs: ConsensusProblem, c2: np.ndarray) -> tuple[gtsam.Values, np.ndarray, int, float]:
+    """Steps 2-4 with thresholds c2: (values, inlier, LM iterations, end of the GNC stage)."""
     # every solve of the starts holds candidates only: one fill-in estimate for all of them (graph.linear)
     with narrow(lambda: cs.built.pairs(cs.cand)):
-        best = _best_start(cs, c2, extra)
+        best = _best_start(cs, c2)
     values, inlier, iters = best.values, best.inlier, best.iterations
     t_gnc = time.perf_counter()
     # 4. polish; admit the loops that fit at the solution; try the unsupported loops closest to fitting jointly.
@@ -463,8 +432,7 @@ def decide(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None = No
         values, it = cs.lm(cs.built.graph(inlier), values, cs.params.solver.lm_max_iterations)
         iters += it
         values, inlier, it = drop_false_groups(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale,
-                                               cs.method, cs.params, cs.notes, cs.stated,
-                                               best.kept if cs.params.robust.group_disputed else None)
+                                               cs.method, cs.params, cs.notes, cs.stated)
     iters += it
     values, inlier, it = retry_rejected(cs.data, cs.built, cs.base_graph, values, inlier, cs.cand, c2, cs.scale,
                                         cs.params, cs.notes)
@@ -485,23 +453,6 @@ def _short_tail(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, 
     r2 = cs.built.r2(values)
     margin = tail_margin(r2[inlier], cs.sigma0, TANGENT_DIM[cs.data.dim], cs.params)
     return np.where(short, c2 * (margin * cs.sigma0 / cs.scale), c2), margin, short, r2
-
-
-def _reach_tail(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray) -> np.ndarray | None:
-    """Thresholds with the tail margin (graph.thresholds.tail_margin) on the short-span loops
-    (graph.thresholds.short_span), or None when every kept short-span loop fits them at `values` (then the decision
-    under them is the one already made).
-
-    A false loop between nodes a few steps apart (Vertigo's local policy) differs from the odometry between them by
-    centimetres: at the solution its residual is small in absolute terms, and the global margin, which must also
-    cover the heavy tail of the agreeing cycles and the strain a lone loop closing a long drift keeps, lets some of
-    them in (manhattan local 50 %: 0.3-0.7 % of them kept). Over a short span no such strain exists, so the margin
-    the kept loops' own residual tail asks for is enough."""
-    tight, margin, short, r2 = _short_tail(cs, values, inlier, c2)
-    misfit = inlier & (r2 > tight)
-    cs.notes.append(f"reach tail: margin {margin:.3g} x variance factor on {int(short.sum())} short-span loops, "
-                 f"{int(misfit.sum())} kept ones misfit")
-    return tight if misfit.any() else None
 
 
 def _short_tail_screen(cs: ConsensusProblem, values: gtsam.Values, inlier: np.ndarray, c2: np.ndarray
@@ -529,9 +480,9 @@ def _short_tail_screen(cs: ConsensusProblem, values: gtsam.Values, inlier: np.nd
 def _family_tight(cs: ConsensusProblem, r2: np.ndarray, inlier: np.ndarray, short: np.ndarray, tight: np.ndarray,
                   margin: float) -> tuple[np.ndarray, float]:
     """(thresholds, margin) of the short-tail screen with the family-wise bound of the n kept loops
-    (graph.snooping.family_bound: chi-square^-1(1 - (1 - p) / n) x the variance factor, p = `inlier_probability`)
+    (graph.thresholds.family_bound: chi-square^-1(1 - (1 - p) / n) x the variance factor, p = `inlier_probability`)
     on the short-span loops where it is tighter than the tail margin, and only where the kept loops follow the
-    calibrated model (at most a share 1 - p of them above its chi-square p quantile: graph.snooping.heavy_tailed).
+    calibrated model (at most a share 1 - p of them above its chi-square p quantile: graph.thresholds.heavy_tailed).
 
     The tail margin is `fence_factor` x a high quantile of the kept loops' r^2: generous by design, since it must
     hold the heaviest true tail of any graph. Where the kept loops follow the calibrated model, n true loops exceed
@@ -633,22 +584,11 @@ def _robust_solve(data: PoseGraphData, params: GraphParams) -> GraphResult:
     stated, notes = cs.stated, cs.notes
     initial_cost = float(stated.graph().error(cs.odometry_values))
     values, inlier, iters, t_gnc = decide(cs, c2)
-    if params.robust.reach_tail and cs.scale != 1.0:
-        tight = _reach_tail(cs, values, inlier, c2)
-        if tight is not None:
-            # decide again under them, with the first decision as one more start (the TLS objective picks)
-            values, inlier, it, t_gnc = decide(cs, tight, extra=values)
-            iters += it
-    if params.robust.short_tail_screen and not params.robust.reach_tail and cs.scale != 1.0:
+    if params.robust.short_tail_screen and cs.scale != 1.0:
         values, inlier, it = _short_tail_screen(cs, values, inlier, c2)
         iters += it
     if params.robust.own_cycle_test and cs.scale != 1.0:
         values, inlier, it = _own_cycle_test(cs, values, inlier, c2)
-        iters += it
-    if params.robust.data_snooping and cs.scale != 1.0:
-        # the kept loops against the family-wise bound where the graph's residuals follow the calibrated model
-        # (graph.snooping)
-        values, inlier, it = snoop(cs, values, inlier)
         iters += it
     t_polish = time.perf_counter()
     # 5. the loop set is decided: converge the map on it (graph.polish; LM stopped at its cost tolerance)

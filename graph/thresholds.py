@@ -77,3 +77,18 @@ def tail_margin(r2_kept: np.ndarray, sigma0: float, dof: int, params: GraphParam
     fence = params.robust.fence_factor * float(np.quantile(r2, params.robust.fence_quantile))
     m = fence / (sigma0 * base_threshold(dof, params))
     return float(np.clip(m, 1.0, max(margin, 1.0)))
+
+
+def family_bound(n: int, dof: int, probability: float) -> float:
+    """chi-square_dof^-1(1 - (1 - probability) / n): the Bonferroni bound of n tests at family-wise level
+    1 - probability (each of n true loops of the calibrated model exceeds it with probability at most
+    (1 - probability) / n; the short-tail screen's `screen_family_bound`)."""
+    return float(chi2.ppf(1.0 - (1.0 - probability) / max(int(n), 1), dof))
+
+
+def heavy_tailed(r2_units: np.ndarray, dof: int, probability: float) -> bool:
+    """More than a share 1 - probability of `r2_units` (squared residuals in units of the variance factor) above the
+    chi-square `probability` quantile: the residuals are heavier-tailed than the calibrated model (intel clean:
+    2.8 %), and a bound that assumes the model does not apply."""
+    r2 = np.asarray(r2_units, float)
+    return bool(len(r2)) and float(np.mean(r2 > chi2.ppf(probability, dof))) > 1.0 - probability

@@ -48,8 +48,9 @@ def _is_pose2(values: gtsam.Values) -> bool:
 
 
 class _IsamSteps:
-    """Warm GNC steps by iSAM2 (`consensus_isam2_steps`): the graph is held once; a step removes and re-adds only
-    the loops whose weight changed and re-factors the cliques they and the moved poses touch."""
+    """Warm GNC steps by iSAM2 (the re-admission's GNC, `readmit_isam2_steps`): the graph is held once; a step
+    removes and re-adds only the loops whose weight changed and re-factors the cliques they and the moved poses
+    touch."""
 
     def __init__(self, base: list, loops: list, values: gtsam.Values, relinearize: float,
                  gauss_newton: bool = False, floor: float = 1e-9):
@@ -80,7 +81,9 @@ class _IsamSteps:
         self.weight = np.full(len(loops), np.nan)     # weight each loop is held at (nan: not yet added)
         self.index = np.full(len(loops), -1, np.int64)  # its factor index in iSAM2 (-1: out)
 
-    def step(self, w: np.ndarray, updates: int) -> gtsam.Values:
+    def step(self, w: np.ndarray) -> gtsam.Values:
+        """One iSAM2 update at weights `w` (a second update per step re-linearised nearly every pose, since a step
+        moves the whole map beyond the threshold, and cost about one LM iteration)."""
         new = gtsam.NonlinearFactorGraph()
         first = np.all(np.isnan(self.weight))
         if first:
@@ -98,17 +101,17 @@ class _IsamSteps:
         r = self.isam.update(new, self.values if first else gtsam.Values(), remove)
         idx = np.asarray(r.getNewFactorsIndices(), np.int64)
         self.index[np.asarray(added, np.int64)] = idx[len(idx) - len(added):]
-        for _ in range(updates - 1):
-            self.isam.update()
         return self.isam.calculateEstimate()
 
 
 def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, label: np.ndarray,
             params: GraphParams, isam2_gauss_newton: bool = False, final_solve: bool = True,
-            zero_below_tol: bool = False) -> tuple[gtsam.Values, np.ndarray, int, int]:
+            zero_below_tol: bool = False, isam2_steps: bool = False) -> tuple[gtsam.Values, np.ndarray, int, int]:
     """GNC-TLS over the loops of `sub` from `values` with one weight per label (cluster); returns (values,
     inlier per loop, outer steps, LM iterations). Odometry + anchor (`base`) are known inliers.
-    `isam2_gauss_newton`: iSAM2 steps (`consensus_isam2_steps`) by Gauss-Newton instead of dogleg.
+    `isam2_steps`: take the warm steps by iSAM2 updates that re-weight only the changed loops (`_IsamSteps`; the
+    re-admission's GNC, `readmit_isam2_steps`), where at most `readmit_isam2_max_changed` loops change weight;
+    `isam2_gauss_newton`: those steps by Gauss-Newton instead of dogleg.
     `final_solve` False: the caller solves the returned labels to convergence itself (or discards the map), so the
     GNC ends at the step whose weights no longer change without solving it, and without the warm LM step after
     iSAM2 steps; the labels are the same, the map is the last step's.
@@ -131,7 +134,7 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
         tol = params.robust.gnc_weights_tol
         floor = tol if zero_below_tol else 1e-9
         # iSAM2 only where the scope would factor the step's graph directly (its fill-in is the same)
-        use_isam = params.robust.consensus_isam2_steps and not costly(
+        use_isam = isam2_steps and not costly(
             lambda: graph_pairs(weighted_graph(base, loops, np.ones(L))))
         isam, polish = None, False
         for outer in range(1, params.robust.gnc_max_iterations + 1):
@@ -153,13 +156,13 @@ def gnc_tls(base: list, sub: BuiltGraph, values: gtsam.Values, c2: np.ndarray, l
             # a fresh iSAM2 costs one batch factorisation and, at the end, one LM polish: not for a step that
             # changes no weight (the last step of a run after a step solved to convergence)
             few = (use_isam and inner == params.robust.consensus_inner_iterations
-                   and changed <= params.robust.consensus_isam2_max_changed and (isam is not None or changed > 0))
+                   and changed <= params.robust.readmit_isam2_max_changed and (isam is not None or changed > 0))
             if few:
                 if isam is None:
-                    isam = _IsamSteps(base, loops, values, params.robust.consensus_isam2_relinearize,
+                    isam = _IsamSteps(base, loops, values, params.robust.readmit_isam2_relinearize,
                                        isam2_gauss_newton, floor)
-                values = isam.step(new_w[label], params.robust.consensus_isam2_updates)
-                iters += params.robust.consensus_isam2_updates
+                values = isam.step(new_w[label])
+                iters += 1
                 polish = True
             else:
                 # a step to convergence, or many loops re-weighted (a near-batch re-factorisation by iSAM2, with

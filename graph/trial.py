@@ -1,4 +1,5 @@
-"""The map's own uncertainty in the test of a loop tried against a solved map (step 4 of graph.robust).
+"""The map's own uncertainty in the test of a loop against a solved map (graph.core_start: loops outside the core
+that misfit its map).
 
 A loop's residual at a map solved without it mixes two things: the loop's own error, and how far the map between
 its ends may move. Under drift (a lone loop closing a long stretch of odometry) the map between its ends is loose,
@@ -18,7 +19,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-__all__ = ["MapUncertainty", "map_mahalanobis"]
+__all__ = ["MapUncertainty"]
 
 
 class MapUncertainty:
@@ -58,15 +59,3 @@ class MapUncertainty:
             J = A
         m = np.eye(len(rhs)) + J @ s @ J.T
         return float(rhs @ np.linalg.solve(m, rhs))
-
-
-def map_mahalanobis(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, loops: list) -> np.ndarray:
-    """r2_map (module doc) of each factor in `loops` (between factors, not in `graph`) at `values`, with the
-    marginal covariance of `graph` (the solved map) at `values`."""
-    out = np.zeros(len(loops))
-    if not loops:
-        return out
-    m = MapUncertainty(graph, values)
-    for n, f in enumerate(loops):
-        out[n] = m.r2(f)
-    return out

@@ -30,6 +30,8 @@ and gets, with no code of its own:
   that one field (`graph.robust=none` for `graph.robust.method=none`), on top of the base when replacing.
 - `MOVED = {"old_key": "group.new_key"}` (class attribute): a key that moved into a nested config is a ConfigError
   naming its new dotted key, not an unknown setting.
+- `REMOVED = {"old_key": "why"}` (class attribute): a key whose setting was removed is a ConfigError saying so and
+  why, not an unknown setting.
 
 Tunables are documented where they are declared, with `setting(default, range=..., unit=..., doc=...)`: the
 range is an interval written as text ("[1, inf)", "(0, 1]", "(0.5, 1)") or a (low, high) pair, closed, None for
@@ -316,6 +318,9 @@ def _build(cls: type, data: Mapping, where: str, base: Any = None) -> Any:
             moved = getattr(cls, "MOVED", {}).get(key)
             if moved is not None:
                 raise _Problem(path, f"this setting moved to {_join(where, moved)}")
+            removed = getattr(cls, "REMOVED", {}).get(key)
+            if removed is not None:
+                raise _Problem(path, f"this setting was removed ({removed})")
             raise _Problem(path, _unknown(cls, str(key)))
         f, tp = by_name[key]
         kwargs[key] = _convert(tp, value, path, getattr(base, key, None))
@@ -410,6 +415,7 @@ class Config:
     LABEL: ClassVar[str | None] = None   # how preset errors name this kind of configuration (default: class name)
     SHORTHAND: ClassVar[str | None] = None   # a scalar given where this config is expected sets this field
     MOVED: ClassVar[Mapping[str, str]] = {}   # former keys -> their dotted key relative to this config (an error)
+    REMOVED: ClassVar[Mapping[str, str]] = {}   # former keys -> why the setting was removed (an error)
 
     def __post_init__(self) -> None:
         owner = type(self).__name__

@@ -39,10 +39,9 @@ def test_readmission_gnc_by_gauss_newton_isam2_steps_keeps_the_labels_of_lm_step
     built, known, v0, c2, cand, true = _readmission_problem()
     sub = built.subset(cand)
     label = np.arange(int(cand.sum()))
-    lm = GraphParams().replace(robust={"consensus_isam2_steps": False})
-    v_lm, kept_lm, _, _ = tls.gnc_tls(known, sub, v0, c2[cand], label, lm)
-    isam = GraphParams().replace(robust={"consensus_isam2_steps": True})
-    v, kept, _, _ = tls.gnc_tls(known, sub, v0, c2[cand], label, isam, gauss_newton, final_solve=final_solve)
+    v_lm, kept_lm, _, _ = tls.gnc_tls(known, sub, v0, c2[cand], label, GraphParams())
+    v, kept, _, _ = tls.gnc_tls(known, sub, v0, c2[cand], label, GraphParams(), gauss_newton, final_solve=final_solve,
+                                isam2_steps=True)
     assert np.array_equal(kept, kept_lm)
     assert kept.any() and np.array_equal(kept, true[cand])     # the six true loops back, every false loop out
     # the caller's re-solve of those labels ends at the same TLS objective from either map (LM's tolerance)

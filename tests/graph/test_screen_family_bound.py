@@ -7,6 +7,7 @@ import pytest
 
 from graph import GraphParams
 from graph.robust import robust_solve
+from graph.thresholds import family_bound, heavy_tailed
 from tests.graph.synth import ate, between, compose, noisy_graph, square_laps
 
 
@@ -57,3 +58,15 @@ def test_clean_graph_unchanged(seed):
     off = robust_solve(bad, GENEROUS.replace(robust={"screen_family_bound": False}))
     assert on.loop_inlier.all()
     assert ate(truth, on.poses) == pytest.approx(ate(truth, off.poses), abs=1e-6)
+
+
+def test_heavy_tail_and_bound():
+    # the bound grows with the number of tests; a tail heavier than the model is told apart
+    assert family_bound(1, 3, 0.99) == pytest.approx(11.345, abs=1e-3)
+    assert family_bound(54000, 3, 0.99) > 3 * family_bound(1, 3, 0.99)
+    # residuals at a solution are the noise shrunk by each loop's redundancy (here 0.7): the model's tail or lighter
+    rng = np.random.default_rng(0)
+    at_solution = 0.7 * rng.chisquare(3, 5000)
+    assert not heavy_tailed(at_solution, 3, 0.99)
+    # one loop in ten with 3x the noise sigma: the tail of intel or garage
+    assert heavy_tailed(at_solution * rng.choice([1.0, 9.0], 5000, p=[0.9, 0.1]), 3, 0.99)

@@ -1,13 +1,15 @@
-"""graph.support.loop_support(propagate=True) on 3D graphs: the cycle error is tested against its first-order
-covariance, the stated noise of every measurement in the cycle propagated through it (numerical Jacobians here).
-Summing the covariances (the default) ignores the lever arm of each step's rotation noise: sphere2500's cycles then
-sit at 3.5x the variance its loops show against ground truth (issue 14, docs/graph.md step 1)."""
+"""graph.support.cycle_support(decompose=...) on 3D graphs: the first-order covariance of each agreeing cycle's
+error, the stated noise of every measurement in the cycle propagated through it, split into the part from the
+translation noise and the part from the rotation noise (the split calibration, graph.calibration, scales the two
+apart); their sum against numerical Jacobians here. Summing the covariances (the cycle test) ignores the lever arm
+of each step's rotation noise: sphere2500's cycles then sit at 3.5x the variance its loops show against ground truth
+(issue 14, docs/graph.md step 1)."""
 import gtsam
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from graph import PoseGraphData
-from graph.support import loop_support
+from graph.support import cycle_support
 
 # g2o / file order (x, y, z, rx, ry, rz) information, sphere2500's: loose rotation, so lever arms matter
 INFO = np.diag([10.0, 10.0, 10.0, 100.0, 100.0, 25.0])
@@ -88,11 +90,16 @@ def _propagated_r2(data: PoseGraphData, p: int, q: int, h: float = 1e-6) -> floa
     return float(e @ np.linalg.solve(s, e))
 
 
-def test_3d_cycles_are_tested_against_the_propagated_covariance():
+def test_decomposed_3d_cycle_covariances_sum_to_the_propagated_covariance():
     # noise at 1 % of the stated sigmas: the first-order covariance is then exact up to O(noise) (at the stated
     # sigmas, 0.1 rad of rotation noise, the cycles' nonlinearity alone moves r^2 by up to 30 %)
     data = _graph(np.random.default_rng(3), noise=0.01)
-    P, Q, r2 = loop_support(data, window=3, threshold=1e12, propagate=True)
-    assert len(P) >= 10
+    cycles = cycle_support(data, window=3, threshold=1e12, decompose=10**6)
+    assert len(cycles.P) >= 10 and np.array_equal(cycles.decomposed, np.arange(len(cycles.P)))
+    # the stated information has no cross blocks: the translation and rotation parts sum to the whole
+    s = cycles.from_translation + cycles.from_rotation
+    e = cycles.errors
+    r2 = np.einsum("ni,ni->n", e, np.linalg.solve(s, e[..., None])[..., 0])
+    P, Q = cycles.P, cycles.Q
     want = [_propagated_r2(data, p, q) for p, q in zip(P.tolist(), Q.tolist())]
     np.testing.assert_allclose(r2, want, rtol=1e-2)

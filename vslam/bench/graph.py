@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fractions", help="false-loop fractions of the true loop count (overrides the set)")
     p.add_argument("--stretch", action="store_true", help="also 70 and 80 %% false loops")
     p.add_argument("--seeds", help="comma-separated seeds (overrides the set)")
-    p.add_argument("--methods", default=",".join(m for m in graph_methods.METHODS if not m.startswith(("ours-tail", "ours-own", "ours-trial-map", "ours-snoop", "ours-refine"))),
+    p.add_argument("--methods", default=",".join(m for m in graph_methods.METHODS if not m.startswith(("ours-own", "ours-refine"))),
                    help="methods: " + ", ".join(graph_methods.METHODS))
     p.add_argument("--peer-max-nodes", type=int, default=4000,
                    help="run " + ", ".join(graph_methods.PEERS_LIMITED) + " on contaminated graphs only up to this "

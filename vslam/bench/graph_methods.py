@@ -106,16 +106,12 @@ def g2o_dcs(data: PoseGraphData, phi: float = DCS_PHI) -> MethodRun:
     return MethodRun(poses, kept, seconds)
 
 
-METHODS = {"ours": ours, "ours-isam2": ours_isam2, "ours-tail-off": ours_setting(reach_tail=False), "ours-tail-on": ours_setting(reach_tail=True),
+METHODS = {"ours": ours, "ours-isam2": ours_isam2,
            "ours-own-off": ours_setting(own_cycle_test=False),
-           "ours-screen-on": ours_setting(short_tail_screen=True), "ours-screen-off": ours_setting(short_tail_screen=False), "ours-trial-map-on": ours_setting(trial_map_covariance=True),
+           "ours-screen-on": ours_setting(short_tail_screen=True), "ours-screen-off": ours_setting(short_tail_screen=False),
            "ours-h16-off": ours_setting(screen_local=False, screen_family_bound=False, retry_clusters=0),
-           "ours-snoop-on": ours_setting(data_snooping=True), "ours-snoop-off": ours_setting(data_snooping=False),
            "ours-refine-on": ours_setting(calibration_refine=5), "ours-refine-off": ours_setting(calibration_refine=0),
-           "ours-disputed-on": ours_setting(group_disputed=True), "ours-disputed-off": ours_setting(group_disputed=False),
            "ours-cycles-5000": ours_setting(calibration_propagate=5000),
-           "ours-majority-on": ours_setting(group_skip_majority=True),
-           "ours-majority-5000": ours_setting(group_skip_majority=True, calibration_propagate=5000),
            "gtsam-gnc": gtsam_gnc, "dcs": dcs, "g2o-dcs": g2o_dcs, "plain-lm": plain_lm}
 # peers run on contaminated graphs only up to --peer-max-nodes (minutes per row beyond)
 PEERS_LIMITED = ("gtsam-gnc", "plain-lm", "g2o-dcs")

@@ -22,9 +22,7 @@ from vslam.evaluation.tables import format_table
 # optimisers ending at the same optimum, e.g. ring 1.432 vs 1.433 m), not a better or worse map
 PEER_SLACK_REL = 0.01
 PEER_SLACK_M = 0.001
-COLUMNS = (("ours", "ours"), ("ours-isam2", "ours (iSAM2)"), ("ours-tail-off", "ours, reach_tail off"),
-           ("ours-tail-on", "ours, reach_tail on"),
-           ("ours-own-off", "ours, own_cycle_test off"), ("ours-trial-map-on", "ours, trial_map_covariance on"),
+COLUMNS = (("ours", "ours"), ("ours-isam2", "ours (iSAM2)"), ("ours-own-off", "ours, own_cycle_test off"),
            ("gtsam-gnc", "GTSAM GNC"), ("dcs", "DCS (GTSAM)"),
            ("g2o-dcs", "DCS (g2o)"), ("plain-lm", "plain LM"))
 ROBUST_PEERS = ("gtsam-gnc", "dcs", "g2o-dcs")

@@ -292,6 +292,19 @@ def test_a_moved_key_names_its_new_home(tmp_path):
         GraphParams().replace(gate_loops=False)
 
 
+def test_a_removed_key_says_so_and_why():
+    @dataclass(frozen=True)
+    class Pruned(Config):
+        REMOVED = {"old": "measured worse"}
+        kept: int = 1
+
+    with pytest.raises(ConfigError, match=r"^Pruned: old: this setting was removed \(measured worse\)$"):
+        Pruned.from_dict({"old": 2})
+    with pytest.raises(ConfigError, match=r"^Pruned: olde: unknown setting"):
+        Pruned.from_dict({"olde": 2})
+    assert Pruned.from_dict({"kept": 3}).kept == 3
+
+
 def test_graph_params_groups_round_trip_and_describe(tmp_path):
     cfg = PipelineConfig().with_overrides(["graph.robust.huber_k=2", "graph.solver=isam2", "graph.robust.method=huber",
                                            "graph.incremental.batch_nodes=7"])
