@@ -157,8 +157,11 @@ class RobustParams(Config):
              "consensus_isam2_max_changed": "readmit_isam2_max_changed"}
 
     method: RobustMode = RobustMode.CONSENSUS
-    inlier_probability: float = setting(0.99, range="(0.5, 1)",
-                                        doc="chi-square quantile of a loop's Mahalanobis residual for an inlier")
+    inlier_probability: float = setting(
+        0.99, range="(0.5, 1)", unit="probability",
+        doc="chi-square quantile of a loop's Mahalanobis residual for an inlier (per-loop threshold before the "
+            "variance factor and margin); 0.99 as GTSAM's GNC and Kimera-RPGO's PCM use it: one true loop in a "
+            "hundred past its quantile is what `calibration_margin` and the re-admission are there for")
     gnc_loss: GncLoss = GncLoss.TLS
     gnc_impl: GncImpl = GncImpl.WARM
     gnc_mu_step: float = setting(1.4, range="(1, inf)", doc="factor on the GNC control parameter per outer iteration")
@@ -176,11 +179,17 @@ class RobustParams(Config):
                                      doc="at most this many re-initialisations over all rounds (cost bound)")
     calibrate_noise: bool = True         # scale the thresholds of those rounds by `thresholds.fence_scale` of the
     #                                      kept loops (public graphs state information 10-1000x too loose)
-    fence_factor: float = setting(10.0, range="[0, inf)",
-                                  doc="an inlier's r^2 is within this many times the kept loops' q-quantile (the "
-                                      "gate's settling rounds; consensus: the short-span tail margin, graph.thresholds.tail_"
-                                      "margin) ...")
-    fence_quantile: float = setting(0.9, range="[0, 1]", doc="... (heavy tails: a high quantile, not the median)")
+    fence_factor: float = setting(
+        10.0, range="[0, inf)", unit="x r^2 quantile",
+        doc="an inlier's r^2 is within this many times the kept loops' fence_quantile of r^2 (the gate's settling "
+            "rounds; consensus: the short-span tail margin, graph.thresholds.tail_margin, capped by "
+            "calibration_margin). 10: the same heavy-tail allowance as calibration_margin, taken on the kept loops' "
+            "own residuals instead of the agreeing cycles' median ...")
+    fence_quantile: float = setting(
+        0.9, range="[0, 1]", unit="quantile",
+        doc="... at this quantile of the kept loops' r^2: a high quantile, not the median, since real graphs' "
+            "residual tails are heavy (garage's worst true loop at 22x the median), yet below 1 so one strained "
+            "loop does not set the fence")
     isolation_window: int = setting(5, range="[0, inf)")   # kept loops with no other kept loop within this many
     #                                      nodes at both ends get the standardized-residual test in those rounds
     #                                      (0: off)
@@ -191,8 +200,11 @@ class RobustParams(Config):
     support_window: int = setting(10, range="[0, inf)", unit="nodes",
                                   doc="loops whose both ends are within this many nodes are tested for agreement "
                                       "over the short odometry cycle between them (graph.support); 0: off")
-    support_probability: float = setting(0.99, range="(0, 1)", unit="probability",
-                                         doc="chi-square quantile of that cycle test")
+    support_probability: float = setting(
+        0.99, range="(0, 1)", unit="probability",
+        doc="chi-square quantile of that cycle test: the cycle is short, so its error is the loops' noise alone and "
+            "the same quantile as `inlier_probability` applies; the support only orders and starts the decision, "
+            "every loop is judged again by the GNC")
     calibration_margin: float = setting(10.0, range="[0, inf)", unit="x variance factor",
                                         doc="loop thresholds = chi-square quantile x this x the variance factor of "
                                             "the agreeing cycles (graph.support; public graphs state noise 10-1000x "
@@ -467,8 +479,15 @@ class RobustParams(Config):
                                          "from the optimum after a 3.6 cm step; at 1e-5, 2e-6 m for one more step)")
     huber_k: float = setting(1.345, range="(0, inf)", doc="kernel width on the whitened residual norm")
     cauchy_k: float = setting(1.0, range="(0, inf)")
-    loop_weighting: LoopWeighting = LoopWeighting.THRESHOLD
-    probability_clip: float = setting(1e-3, range="(0, 0.5)", doc="p is clipped to [clip, 1 - clip] before the logit")
+    loop_weighting: LoopWeighting = setting(
+        LoopWeighting.THRESHOLD,
+        doc="how a loop's P(loop | score) from the loop detector enters (graph files carry none: no effect there): "
+            "threshold shifts its inlier threshold by 2 logit(p), the Bayesian test of the hypothesis against its "
+            "alternative; a probability is evidence about the claim, not about the measurement noise")
+    probability_clip: float = setting(
+        1e-3, range="(0, 0.5)", unit="probability",
+        doc="p is clipped to [clip, 1 - clip] before the logit: the shift stays within +-13.8 (2 logit(0.999)), so "
+            "no calibrated score makes a loop certain either way")
     # --- loop gate (robust modes): a loop is tested on arrival against the current estimate, in time order
     gate_loops: bool = True              # batch robust solves run the gated incremental pass first (see docs/graph.md)
     gate_uncertainty: bool = True        # add the odometry drift since the last loop closure to the arrival test
@@ -511,6 +530,36 @@ class RobustParams(Config):
                   "of `consensus_inner_iterations`: the steps left are then a TLS descent, and with a few warm "
                   "iterations per step it moved by a few dozen labels per step for 40+ steps (city10000 at 50 % "
                   "random-grouped false loops) until the map settled")
+
+
+# What each robust setting is, for the reader deciding what to touch (docs/graph.md, "Tunables"). Only the
+# `decision` settings define the model a loop is judged by; every `budget` bounds work and every `mechanism` switches
+# a step measured on the benchmark (on or off as its doc says why), and `other_methods` belong to the non-default
+# methods (arrival gate, settling rounds of the GNC mode, M-estimators). tests/graph/test_params.py keeps this a
+# partition of the fields.
+ROBUST_KINDS: dict[str, tuple[str, ...]] = {
+    "decision": ("method", "inlier_probability", "support_window", "support_probability", "calibration_margin",
+                 "confident_min_cluster", "fence_factor", "fence_quantile", "own_cycle_quantile", "kernel_phi",
+                 "loop_weighting", "probability_clip"),
+    "budget": ("gnc_mu_step", "gnc_max_iterations", "gnc_inner_iterations", "gnc_mu_floor", "gnc_weights_tol",
+               "gnc_cost_tol", "consensus_mu_step", "consensus_inner_iterations", "calibration_propagate",
+               "calibration_min_loops", "calibration_refine", "readmit_rounds", "readmit_max_loops", "trial_max_loops",
+               "group_tests", "retry_clusters", "kernel_descent_rounds", "confident_misfit_max_share",
+               "cluster_direct_max_cost", "cluster_representatives", "core_alone_max_split", "core_max_cost",
+               "polish_max_steps", "polish_backtracks", "polish_step_tol", "readmit_isam2_relinearize",
+               "readmit_isam2_max_changed"),
+    "mechanism": ("gnc_loss", "gnc_impl", "calibrate_noise", "calibration_split", "own_cycle_test",
+                  "readmit_short_tail", "short_tail_screen", "screen_local", "screen_family_bound",
+                  "readmit_isam2_steps", "readmit_isam2_gauss_newton", "trial_forecast", "retry_forecast",
+                  "group_margin_once", "group_joint_screen", "odometry_start", "odometry_start_short_skip",
+                  "kernel_start", "confident_start", "cluster_start", "cluster_zero_weights", "cluster_decided_alone",
+                  "core_start", "core_alone", "consensus_binary_converge"),
+    "other_methods": ("reinit_rounds", "reinit_max_solves", "isolation_window", "readmit_factor",
+                      "isolation_max_tests", "huber_k", "cauchy_k", "gate_loops", "gate_uncertainty",
+                      "gate_drift_transport", "gate_probability", "gate_factor", "gate_quantile", "gate_window",
+                      "gate_admitted_cap", "gate_kernel_factor", "gate_fallback_share", "gate_min_loops",
+                      "gate_warmup_stated"),
+}
 
 
 @dataclass(frozen=True)
