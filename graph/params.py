@@ -325,6 +325,12 @@ class RobustParams(Config):
                    "quantile of ~10^4 dof, 3 % above its mean, i.e. the variance factor rather than the claim "
                    "(sphere2500 random 50 %, seed 3, with 5000 calibration cycles: all 2451 kept loops dropped, "
                    "23.3 m; docs/graph.md). Off: not yet measured on the whole table")
+    disputed_clusters: int = setting(
+        50, range="[0, inf)", unit="clusters",
+        doc="after the group test, the kept clusters of 2+ loops that some start of the decision (GNC or TLS "
+            "descent) rejected whole leave at once, the map is re-solved without them and each is offered back "
+            "(graph.disputed); the new set stands when the TLS objective with each charged as one hypothesis is "
+            "lower. Up to this many disputed clusters (more: not tested, each offer is a solve); 0: off")
     retry_clusters: int = setting(3, range="[0, inf)", unit="clusters",
                                   doc="after the group test, re-try this many supported clusters rejected whole "
                                       "(those nearest their thresholds first): all back, LM, TLS descent over the "

@@ -47,6 +47,7 @@ from graph.batch import BuiltGraph, build, initial_guess, resolve_init, solve_lm
 from graph.calibration import VarianceFactors, refined_factor, scale_information, split_factors
 from graph.cluster_start import cluster_starts
 from graph.confident import confident_first, confident_holds, confident_start, confident_whole, whole_misfit_share
+from graph.disputed import judge_disputed
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.groups import drop_false_groups, group_threshold, retry_rejected
 from graph.kernel_start import dcs_solve, tls_descent
@@ -465,6 +466,9 @@ def decide(cs: ConsensusProblem, c2: np.ndarray, extra: gtsam.Values | None = No
         values, inlier, it = drop_false_groups(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale,
                                                cs.method, cs.params, cs.notes, cs.stated,
                                                best.kept if cs.params.robust.group_disputed else None)
+    iters += it
+    values, inlier, it = judge_disputed(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale, cs.method,
+                                        cs.params, cs.notes, best.kept, cs.stated)
     iters += it
     values, inlier, it = retry_rejected(cs.data, cs.built, cs.base_graph, values, inlier, cs.cand, c2, cs.scale,
                                         cs.params, cs.notes)

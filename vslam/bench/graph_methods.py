@@ -114,6 +114,7 @@ METHODS = {"ours": ours, "ours-isam2": ours_isam2, "ours-tail-off": ours_setting
            "ours-refine-on": ours_setting(calibration_refine=5), "ours-refine-off": ours_setting(calibration_refine=0),
            "ours-disputed-on": ours_setting(group_disputed=True), "ours-disputed-off": ours_setting(group_disputed=False),
            "ours-cycles-5000": ours_setting(calibration_propagate=5000),
+           "ours-joint-on": ours_setting(disputed_clusters=20),
            "ours-majority-on": ours_setting(group_skip_majority=True),
            "ours-majority-5000": ours_setting(group_skip_majority=True, calibration_propagate=5000),
            "gtsam-gnc": gtsam_gnc, "dcs": dcs, "g2o-dcs": g2o_dcs, "plain-lm": plain_lm}
