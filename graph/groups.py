@@ -166,7 +166,8 @@ def group_objective(base_graph: gtsam.NonlinearFactorGraph, built: BuiltGraph, v
 
 def retry_rejected(data: PoseGraphData, built: BuiltGraph, base_graph: gtsam.NonlinearFactorGraph,
                    values: gtsam.Values, inlier: np.ndarray, cand: np.ndarray, c2: np.ndarray, scale: float,
-                   params: GraphParams, notes: list[str]) -> tuple[gtsam.Values, np.ndarray, int]:
+                   params: GraphParams, notes: list[str], budget: int | None = None
+                   ) -> tuple[gtsam.Values, np.ndarray, int]:
     """Re-try the supported revisit clusters (graph.support.revisits over `cand`) rejected whole: each of the
     `retry_clusters` nearest their thresholds (summed r^2 over summed c2) goes back with every kept loop, LM from
     the solution, then TLS descent over the kept loops and it (the misfits leave, re-solve); the new set stands
@@ -178,8 +179,8 @@ def retry_rejected(data: PoseGraphData, built: BuiltGraph, base_graph: gtsam.Non
     bent map). Charging the clusters at their group thresholds keeps the move consistent with the group test: a
     false group it dropped does not come back because sixteen per-loop thresholds outweigh one bend. Cost: one LM
     solve and a TLS descent per tried cluster; the order puts the thousands of false groups of a 10^4-node graph,
-    off by 10^3-10^4 times their thresholds, last."""
-    budget = params.robust.retry_clusters
+    off by 10^3-10^4 times their thresholds, last. `budget`: clusters tried (default `retry_clusters`)."""
+    budget = params.robust.retry_clusters if budget is None else budget
     out = cand & ~inlier
     if budget <= 0 or not out.any():
         return values, inlier, 0

@@ -330,6 +330,12 @@ class RobustParams(Config):
                                    "(those nearest their thresholds first) and drop a cluster whose absence lowers "
                                    "the TLS objective: a group of consistent false loops the map bent to fits "
                                    "loop by loop (graph.robust); 0: off")
+    disputed_clusters: int = setting(
+        50, range="[0, inf)", unit="clusters",
+        doc="after the group test, the kept clusters of 2+ loops that some start of the decision (GNC or TLS "
+            "descent) rejected whole leave at once, the map is re-solved without them and each is offered back "
+            "(graph.disputed); the new set stands when the TLS objective with each charged as one hypothesis is "
+            "lower. Up to this many disputed clusters (more: not tested, each offer is a solve); 0: off")
     retry_clusters: int = setting(3, range="[0, inf)", unit="clusters",
                                   doc="after the group test, re-try this many supported clusters rejected whole "
                                       "(those nearest their thresholds first): all back, LM, TLS descent over the "
@@ -544,7 +550,7 @@ ROBUST_KINDS: dict[str, tuple[str, ...]] = {
     "budget": ("gnc_mu_step", "gnc_max_iterations", "gnc_inner_iterations", "gnc_mu_floor", "gnc_weights_tol",
                "gnc_cost_tol", "consensus_mu_step", "consensus_inner_iterations", "calibration_propagate",
                "calibration_min_loops", "calibration_refine", "readmit_rounds", "readmit_max_loops", "trial_max_loops",
-               "group_tests", "retry_clusters", "kernel_descent_rounds", "confident_misfit_max_share",
+               "group_tests", "disputed_clusters", "retry_clusters", "kernel_descent_rounds", "confident_misfit_max_share",
                "cluster_direct_max_cost", "cluster_representatives", "core_alone_max_split", "core_max_cost",
                "polish_max_steps", "polish_backtracks", "polish_step_tol", "readmit_isam2_relinearize",
                "readmit_isam2_max_changed"),

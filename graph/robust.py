@@ -14,7 +14,8 @@
 4. polish with the kept loops; the group-level test (each kept revisit cluster one TLS term at the chi-square
    quantile of its n x dof, dropped when the objective is lower without it, those nearest their thresholds first:
    a group of mutually consistent false loops is one hypothesis the rest of the map accepts or rejects as a
-   whole); then re-admit every rejected loop that fits its own threshold at the solution.
+   whole); the clusters some start rejected whole, out at once and offered back one by one (graph.disputed);
+   then re-admit every rejected loop that fits its own threshold at the solution.
    Then the short-tail screen (`_short_tail_screen`): the kept short-span loops are judged at the kept loops' tail
    margin on the map re-solved without them, where a false loop that bent its few steps of odometry no longer fits
    (at the family-wise bound of the kept loops instead where they follow the calibrated model; each dropped revisit
@@ -43,6 +44,7 @@ from graph.batch import BuiltGraph, build, initial_guess, resolve_init, solve_lm
 from graph.calibration import VarianceFactors, refined_factor, scale_information, split_factors
 from graph.cluster_start import cluster_starts
 from graph.confident import confident_first, confident_holds, confident_start, confident_whole, whole_misfit_share
+from graph.disputed import judge_disputed
 from graph.factors import array_from_values, graph_of, values_from_array
 from graph.groups import drop_false_groups, group_threshold, retry_rejected
 from graph.kernel_start import dcs_solve, tls_descent
@@ -196,6 +198,7 @@ class _Best:
     inlier: np.ndarray | None = None
     untouched: bool = False      # GNC took no step and kept every candidate: local consensus = global solution
     iterations: int = 0
+    kept: list[np.ndarray] = field(default_factory=list)     # the loops each start kept (graph.disputed)
 
 
 def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values, best: _Best,
@@ -211,6 +214,7 @@ def _run_start(cs: ConsensusProblem, c2: np.ndarray, name: str, v0: gtsam.Values
         best.iterations += it
     inlier = np.zeros(cs.loops, bool)
     inlier[cand] = kept
+    best.kept.append(inlier)
     f = tls_objective(cs.base_graph, sub, values, c2[cand])
     cs.notes.append(f"start {name}: {'TLS descent' if descent else 'GNC'} {outer} steps, TLS objective {f:.6g}, "
                     f"{int(kept.sum())} loops kept")
@@ -433,6 +437,9 @@ def decide(cs: ConsensusProblem, c2: np.ndarray) -> tuple[gtsam.Values, np.ndarr
         iters += it
         values, inlier, it = drop_false_groups(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale,
                                                cs.method, cs.params, cs.notes, cs.stated)
+    iters += it
+    values, inlier, it = judge_disputed(cs.data, cs.built, cs.base_graph, values, inlier, c2, cs.scale, cs.method,
+                                        cs.params, cs.notes, best.kept, cs.stated)
     iters += it
     values, inlier, it = retry_rejected(cs.data, cs.built, cs.base_graph, values, inlier, cs.cand, c2, cs.scale,
                                         cs.params, cs.notes)

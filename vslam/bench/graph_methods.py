@@ -112,6 +112,7 @@ METHODS = {"ours": ours, "ours-isam2": ours_isam2,
            "ours-h16-off": ours_setting(screen_local=False, screen_family_bound=False, retry_clusters=0),
            "ours-refine-on": ours_setting(calibration_refine=5), "ours-refine-off": ours_setting(calibration_refine=0),
            "ours-cycles-5000": ours_setting(calibration_propagate=5000),
+           "ours-joint-off": ours_setting(disputed_clusters=0),
            "gtsam-gnc": gtsam_gnc, "dcs": dcs, "g2o-dcs": g2o_dcs, "plain-lm": plain_lm}
 # peers run on contaminated graphs only up to --peer-max-nodes (minutes per row beyond)
 PEERS_LIMITED = ("gtsam-gnc", "plain-lm", "g2o-dcs")
