@@ -29,14 +29,20 @@ def _two_groups(seed: int):
     return data, truth, false
 
 
-def _judge(seed: int, also_true: bool):
-    """Every loop kept on the map bent by both groups; the starts: that set, and one that rejected both groups (and,
-    with `also_true`, a true revisit cluster as well)."""
+def _bent(seed: int):
+    """The two-group square with every loop kept, on the map the groups bent."""
     data, truth, false = _two_groups(seed)
     p = GraphParams()
     cs, c2 = _prepare(data, p)
     inlier = np.ones(data.num_loops, bool)
     values, _ = cs.lm(cs.built.graph(inlier), cs.odometry_values, p.solver.lm_max_iterations)
+    return data, truth, false, p, cs, c2, inlier, values
+
+
+def _judge(seed: int, also_true: bool):
+    """The starts: every loop kept, and a start that rejected both groups (and, with `also_true`, a true revisit
+    cluster as well)."""
+    data, truth, false, p, cs, c2, inlier, values = _bent(seed)
     other = ~false
     if also_true:
         component = revisits(data, p.robust.support_window, ~false)
@@ -59,11 +65,7 @@ def test_false_groups_out_and_true_clusters_back(seed, also_true):
 
 
 def test_no_disagreement_between_starts_leaves_the_decision():
-    data, truth, false = _two_groups(0)
-    p = GraphParams()
-    cs, c2 = _prepare(data, p)
-    inlier = np.ones(data.num_loops, bool)
-    values, _ = cs.lm(cs.built.graph(inlier), cs.odometry_values, p.solver.lm_max_iterations)
+    data, _, _, p, cs, c2, inlier, values = _bent(0)
     v, kept, _ = judge_disputed(data, cs.built, cs.base_graph, values, inlier, c2, cs.scale, cs.method, p, [],
                                 [inlier, inlier], cs.stated)
     assert v is values and np.array_equal(kept, inlier)
