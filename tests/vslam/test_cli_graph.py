@@ -57,3 +57,32 @@ def test_graph_info(tmp_path, capsys):
     src.write_text(GRAPH)
     assert main(["graph", "info", str(src)]) == 0
     assert "4 vertices (SE(2)), 4 edges: 3 odometry, 1 loops" in capsys.readouterr().out
+
+
+def test_graph_optimize_reads_settings_from_config_and_set(tmp_path, capsys):
+    src = tmp_path / "in.g2o"
+    src.write_text(GRAPH)
+    cfg = tmp_path / "graph.yaml"
+    cfg.write_text("graph:\n  robust:\n    support_window: 20\n")      # a pipeline config's section works too
+    assert main(["graph", "optimize", str(src), "--out", str(tmp_path / "o.g2o"), "--config", str(cfg),
+                 "--set", "robust.calibration_margin=5", "--set", "graph.solver.lm_max_iterations=7",
+                 "--print-config"]) == 0
+    text = capsys.readouterr().out
+    assert "support_window: 20" in text and "calibration_margin: 5" in text and "lm_max_iterations: 7" in text
+    assert not (tmp_path / "o.g2o").exists()          # --print-config only prints
+    assert main(["graph", "optimize", str(src), "--out", str(tmp_path / "o.g2o"), "--set",
+                 "robust.method=none"]) == 0
+    assert "robust none" in capsys.readouterr().out
+
+
+def test_graph_optimize_bad_or_removed_setting_is_a_clear_error(tmp_path, capsys):
+    src = tmp_path / "in.g2o"
+    src.write_text(GRAPH)
+    rc = main(["graph", "optimize", str(src), "--out", str(tmp_path / "o.g2o"), "--set", "robust.support_window=-1"])
+    err = capsys.readouterr().err
+    assert rc != 0 and "--set" in err and "support_window" in err
+    rc = main(["graph", "optimize", str(src), "--out", str(tmp_path / "o.g2o"), "--set",
+               "robust.data_snooping=true"])
+    err = capsys.readouterr().err
+    assert rc != 0 and "data_snooping" in err and "removed" in err
+    assert not (tmp_path / "o.g2o").exists()

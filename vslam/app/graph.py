@@ -11,6 +11,7 @@ import numpy as np
 from graph import GraphParams, optimize, read_graph, write_graph
 from graph.errors import GraphError
 from odometry.shared.atomic_io import atomic_write_text
+from odometry.shared.config import parse_assignments, read_mapping
 
 LABELS_HEADER = "edge,from,to,inlier,weight,r2"
 
@@ -40,16 +41,39 @@ class GraphRun:
     warnings: tuple[str, ...] = ()    # what the reader and solver warned about (skipped records, disconnected parts)
 
 
+def graph_params(preset: str = "default", config: str | Path | None = None,
+                 overrides: list[str] | tuple[str, ...] = ()) -> GraphParams:
+    """The preset, then a config file's settings, then KEY=VALUE assignments. Keys are GraphParams' own
+    (`robust.support_window`, `solver.lm_max_iterations`); a pipeline config's `graph:` section and `graph.`-prefixed
+    keys are read the same way, so one file serves `vslam run` and `vslam graph optimize`."""
+    params = GraphParams.preset(preset)
+    if config is not None:
+        params = GraphParams.from_dict(_graph_section(read_mapping(config)), str(config), base=params)
+    if overrides:
+        params = GraphParams.from_dict(_graph_section(parse_assignments(overrides, "--set")), "--set", base=params)
+    return params
+
+
+def _graph_section(d: dict) -> dict:
+    inner = d.get("graph")
+    if isinstance(inner, dict):
+        rest = {k: v for k, v in d.items() if k != "graph"}
+        return {**rest, **inner}
+    return d
+
+
 def optimize_graph_file(path: str | Path, out: str | Path, preset: str = "default", solver: str | None = None,
                         robust: str | None = None, init: str | None = None, tum: str | Path | None = None,
-                        labels: str | Path | None = None) -> GraphRun:
-    """Optimise a g2o / TORO file with a GraphParams preset and write `out` (same ids, edge order, information and
-    comments); optionally the trajectory as TUM (timestamps = vertex ids) and one CSV row per loop."""
+                        labels: str | Path | None = None, params: GraphParams | None = None) -> GraphRun:
+    """Optimise a g2o / TORO file with `params` (default: the GraphParams preset) and write `out` (same ids, edge
+    order, information and comments); optionally the trajectory as TUM (timestamps = vertex ids) and one CSV row per
+    loop. `solver`, `robust`, `init` override the params' methods."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         data = read_graph(path)
         try:
-            res = optimize(data, GraphParams.preset(preset), solver=solver, robust=robust, init=init)
+            res = optimize(data, params if params is not None else GraphParams.preset(preset), solver=solver,
+                           robust=robust, init=init)
         except GraphError as exc:         # the solver's errors do not know the file: name it
             raise GraphError(f"{path}: {exc}") from exc
     write_graph(out, data, res.poses)

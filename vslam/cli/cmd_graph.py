@@ -27,6 +27,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o.add_argument("--init", choices=("auto", "lago", "odometry", "chordal", "given"), default=None,
                    help="initial guess for LM (default auto: LAGO / chordal without robust mode, else odometry)")
     o.add_argument("--preset", choices=PRESETS, default="default", help="GraphParams preset")
+    o.add_argument("--config", metavar="FILE",
+                   help="YAML / TOML / JSON with GraphParams settings (solver: / robust: / incremental:, or a pipeline "
+                        "config's graph: section), applied on the preset")
+    o.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one setting by its dotted key, e.g. --set robust.calibration_margin=5 (repeatable; "
+                        "after --config; keys: python -c \"from graph import GraphParams; "
+                        "print(GraphParams.describe())\")")
+    o.add_argument("--print-config", action="store_true", help="print the effective GraphParams as YAML and exit")
     o.add_argument("--tum", metavar="TRAJ", help="also write the optimised trajectory (TUM; timestamps = vertex ids)")
     o.add_argument("--labels", metavar="CSV", help="also write one row per loop: edge index, ids, inlier, weight, r2")
     o.set_defaults(func=run_optimize)
@@ -47,10 +55,14 @@ def run_info(a: argparse.Namespace) -> int:
 
 
 def run_optimize(a: argparse.Namespace) -> int:
-    from vslam.app.graph import optimize_graph_file
+    from vslam.app.graph import graph_params, optimize_graph_file
 
-    res = optimize_graph_file(a.input, a.out, a.preset, solver=a.solver, robust=a.robust, init=a.init, tum=a.tum,
-                              labels=a.labels)
+    params = graph_params(a.preset, a.config, a.overrides)
+    if a.print_config:
+        print(params.dumps(), end="")
+        return 0
+    res = optimize_graph_file(a.input, a.out, solver=a.solver, robust=a.robust, init=a.init, tum=a.tum,
+                              labels=a.labels, params=params)
     for w in res.warnings:
         print(f"vslam graph: warning: {w}", file=sys.stderr)
     print("\n".join(res.lines))
