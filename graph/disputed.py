@@ -15,21 +15,17 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from graph.batch import BuiltGraph, initial_guess, solve_lm
-from graph.factors import values_from_array
-from graph.groups import group_objective, group_threshold, retry_rejected
+from graph.batch import BuiltGraph, solve_lm
+from graph.groups import group_objective, group_threshold, kept_clusters, lower_of_fresh_start, retry_rejected
 from graph.model import TANGENT_DIM, PoseGraphData
 from graph.params import GraphParams, InitMethod
-from graph.support import revisits
 
 
 def disputed_clusters(data: PoseGraphData, inlier: np.ndarray, starts: list[np.ndarray], window: int
                       ) -> tuple[np.ndarray, np.ndarray]:
     """(cluster label per loop over the kept loops, the labels of kept clusters of 2+ loops that some start in
     `starts` (the loops each start kept) kept none of)."""
-    component = revisits(data, window, inlier)
-    labels, counts = np.unique(component[inlier], return_counts=True)
-    labels = labels[counts >= 2]               # a lone loop is GNC's to judge, one weight each
+    component, labels = kept_clusters(data, inlier, window)
     doubt = np.zeros(len(labels), bool)
     for k in starts:
         doubt |= ~np.isin(labels, component[inlier & k])
@@ -63,17 +59,8 @@ def judge_disputed(data: PoseGraphData, built: BuiltGraph, base_graph: gtsam.Non
         return group_objective(base_graph, built, v, c2, charged)
 
     v, iters = solve_lm(built.graph(trial), values, params, params.solver.lm_max_iterations)
-    f = objective(v)
-    # and from a fresh LAGO / chordal start: a map bent by a false group does not unbend by local steps
-    try:
-        start = built if start_built is None else start_built
-        guess = values_from_array(data.dim, initial_guess(data, start.subset(trial), init))
-        v2, it = solve_lm(built.graph(trial), guess, params, params.solver.lm_max_iterations)
-        iters += it
-        if objective(v2) < f:
-            v = v2
-    except RuntimeError:
-        pass
+    v, _, it = lower_of_fresh_start(data, built, trial, v, objective, init, params, start_built)
+    iters += it
     v, new, it = retry_rejected(data, built, base_graph, v, trial, inlier, c2, scale, params, notes, budget=len(doubt))
     iters += it
     f0, f = objective(values), objective(v)

@@ -97,9 +97,7 @@ def drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFac
     if budget <= 0 or not inlier.any():
         return values, inlier, 0
     dof = TANGENT_DIM[data.dim]
-    component = revisits(data, params.robust.support_window, inlier)
-    labels, counts = np.unique(component[inlier], return_counts=True)
-    groups = labels[counts >= 2]                # a lone loop is GNC's to judge, one weight each
+    component, groups = kept_clusters(data, inlier, params.robust.support_window)
     if not len(groups):
         return values, inlier, 0
     ratio = _cluster_ratio(built.r2(values), c2, component, groups)
@@ -126,25 +124,41 @@ def drop_false_groups(data: PoseGraphData, built, base_graph: gtsam.NonlinearFac
         iters += it
         c2g = group_threshold(prob[member], dof, scale, params, odometry_factor)
         f0 = objective(values, member, c2g)
-        f = objective(v, member, c2g)
-        # also from a fresh LAGO / chordal start on the rest: a map bent by tens of metres does not unbend by
-        # local steps (ring random-grouped: a local minimum above the objective with the group kept)
-        try:
-            start = built if start_built is None else start_built
-            guess = values_from_array(data.dim, initial_guess(data, start.subset(trial), init))
-            v2, it = solve_lm(built.graph(trial), guess, params, params.solver.lm_max_iterations)
-            iters += it
-            f2 = objective(v2, member, c2g)
-            if f2 < f:
-                v, f = v2, f2
-        except RuntimeError:
-            pass
+        v, f, it = lower_of_fresh_start(data, built, trial, v, lambda x: objective(x, member, c2g), init, params,
+                                        start_built)
+        iters += it
         if f < f0:
             values, inlier = v, trial
             dropped += int(member.sum())
     if dropped:
         notes.append(f"group test: dropped {dropped} loops in clusters that lowered the TLS objective by leaving")
     return values, inlier, iters
+
+
+def kept_clusters(data: PoseGraphData, inlier: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """(revisit-cluster label per loop over the kept loops (graph.support.revisits), the labels of the clusters of
+    2+ kept loops): a lone loop is GNC's to judge, one weight each."""
+    component = revisits(data, window, inlier)
+    labels, counts = np.unique(component[inlier], return_counts=True)
+    return component, labels[counts >= 2]
+
+
+def lower_of_fresh_start(data: PoseGraphData, built: BuiltGraph, trial: np.ndarray, warm: gtsam.Values,
+                         objective, init: InitMethod, params: GraphParams, start_built: BuiltGraph | None = None
+                         ) -> tuple[gtsam.Values, float, int]:
+    """(values, objective, LM iterations): the map solved with the loops of `trial` from a fresh LAGO / chordal
+    start (on `start_built`'s information, default `built`) where its `objective` is lower than at `warm` (already
+    solved with them), else `warm`. A map bent by tens of metres does not unbend by local steps (ring
+    random-grouped: a local minimum above the objective with the group kept)."""
+    f = objective(warm)
+    try:
+        start = built if start_built is None else start_built
+        guess = values_from_array(data.dim, initial_guess(data, start.subset(trial), init))
+        v2, it = solve_lm(built.graph(trial), guess, params, params.solver.lm_max_iterations)
+    except RuntimeError:
+        return warm, f, 0
+    f2 = objective(v2)
+    return (v2, f2, it) if f2 < f else (warm, f, it)
 
 
 def _cluster_ratio(r2: np.ndarray, c2: np.ndarray, component: np.ndarray, groups: np.ndarray) -> np.ndarray:
